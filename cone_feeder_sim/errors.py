@@ -1,0 +1,31 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The package's exception hierarchy: one root, one class per concern."""
+
+
+class ConeFeederError(Exception):
+    """Root of every error raised on purpose by cone_feeder_sim."""
+
+
+class ParameterError(ConeFeederError, ValueError):
+    """A model, product or solver parameter is missing, of the wrong type or out of range."""
+
+
+class ScenarioError(ConeFeederError, ValueError):
+    """A scenario file or a particle specification is malformed."""
+
+
+class IntegrationError(ConeFeederError, RuntimeError):
+    """The integrator could not advance a particle (step size underflow, non-finite state)."""

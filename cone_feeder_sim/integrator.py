@@ -1,0 +1,212 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Adaptive integration of every particle over one interval, with exit location.
+
+The pieces are independent in the paper's model, so each particle is advanced with its own
+step size by :func:`advance_particle`; :func:`advance_batch` loops over the particles. The
+step control (error norm, step-size proposal) is separate from the method
+(:mod:`cone_feeder_sim.rosenbrock`) and from the vector field (:mod:`cone_feeder_sim.model`).
+
+The rotation input over the interval is a list of segments of constant angular
+acceleration: seg_t (K+1,) breakpoints (s), seg_omega (K,) angular velocity at the start of
+each segment (rad/s), seg_domega (K,) angular acceleration in it (rad/s^2). Steps never
+cross a breakpoint.
+
+A failed step is a result: the particle gets status FAILED and the others carry on.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from cone_feeder_sim.model import rhs, STATE_SIZE
+from cone_feeder_sim.rosenbrock import ERROR_ORDER, rodas_step
+
+jit = numba.njit(cache=True, error_model='numpy')
+
+ACTIVE = 0
+EXITED = 1
+FAILED = 2
+
+# failure reasons (stored in stats[:, STAT_REASON])
+REASON_NONE = 0
+REASON_STEP_UNDERFLOW = 1
+REASON_TOO_MANY_STEPS = 2
+REASON_NOT_FINITE = 3
+
+STAT_ACCEPTED = 0
+STAT_REJECTED = 1
+STAT_REASON = 2
+STAT_WIDTH = 3
+
+SAFETY = 0.9
+FAC_MIN = 0.2
+FAC_MAX = 6.0
+BISECTION_STEPS = 60
+
+
+@jit
+def error_norm(err, y0, y1, rtol, atol):
+    """Return the RMS of err scaled by atol + rtol*max(|y0|, |y1|), component by component."""
+    n = err.shape[0]
+    acc = 0.0
+    for i in range(n):
+        sc = atol[i] + rtol * max(abs(y0[i]), abs(y1[i]))
+        e = err[i] / sc
+        acc += e * e
+    return math.sqrt(acc / n)
+
+
+@jit
+def step_factor(err):
+    """Return the factor for the next step size given the scaled error norm of this step."""
+    if err == 0.0:
+        return FAC_MAX
+    fac = SAFETY * err ** (-1.0 / (ERROR_ORDER + 1))
+    return min(FAC_MAX, max(FAC_MIN, fac))
+
+
+@jit
+def hermite_position(theta, h, xa, wa, xb, wb, i):
+    """Return component i of the cubic Hermite interpolant of positions at fraction theta."""
+    t2 = theta * theta
+    t3 = t2 * theta
+    return ((2.0 * t3 - 3.0 * t2 + 1.0) * xa[i] + (t3 - 2.0 * t2 + theta) * h * wa[i]
+            + (-2.0 * t3 + 3.0 * t2) * xb[i] + (t3 - t2) * h * wb[i])
+
+
+@jit
+def locate_exit(h, ya, yb, r_exit):
+    """
+    Return theta in (0, 1] where the radius of the interpolated path first reaches r_exit.
+
+    ya, yb: states at the start and end of an accepted step, with radius(ya) < r_exit <=
+    radius(yb). Positions are interpolated by the cubic Hermite polynomial through positions
+    and velocities (dx/dt = w in cone axes), accurate to O(h^4); the root is bracketed.
+    """
+    xa = ya[0:3]
+    wa = ya[3:6]
+    xb = yb[0:3]
+    wb = yb[3:6]
+    lo = 0.0
+    hi = 1.0
+    r2 = r_exit * r_exit
+    for _ in range(BISECTION_STEPS):
+        mid = 0.5 * (lo + hi)
+        px = hermite_position(mid, h, xa, wa, xb, wb, 0)
+        py = hermite_position(mid, h, xa, wa, xb, wb, 1)
+        if px * px + py * py >= r2:
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+@jit
+def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rtol, atol,
+                     h_min, max_steps, stats, jac, piv, k, f, ft, ys, y1, f0):
+    """
+    Advance one particle through all segments, or until it exits or fails.
+
+    y (9,) is updated in place (cone axes). h_prop is the proposed first step (s).
+    Returns (status, t_end_or_exit, h_prop): status ACTIVE when the interval was completed,
+    EXITED with the exit time (y then holds the state at the exit), or FAILED with the time
+    reached (y holds the last accepted state; stats[STAT_REASON] tells why).
+    """
+    n_seg = seg_omega.shape[0]
+    steps = 0
+    t = seg_t[0]
+    for s in range(n_seg):
+        t_seg = seg_t[s]
+        t_end = seg_t[s + 1]
+        omega_s = seg_omega[s]
+        domega = seg_domega[s]
+        while t < t_end:
+            remaining = t_end - t
+            truncated = h_prop >= remaining
+            h = remaining if truncated else h_prop
+            omega0 = omega_s + domega * (t - t_seg)
+            rhs(y, pp, gp, omega0, domega, f0)
+            ok = rodas_step(y, f0, t, h, omega0, domega, pp, gp, jac, piv, k, f, ft, ys, y1)
+            err = error_norm(k[5], y, y1, rtol, atol) if ok else np.inf
+            steps += 1
+            if steps > max_steps:
+                stats[STAT_REASON] = REASON_TOO_MANY_STEPS
+                return FAILED, t, h_prop
+            if not (err <= 1.0):
+                stats[STAT_REJECTED] += 1
+                if math.isfinite(err):
+                    h_prop = h * max(FAC_MIN, SAFETY * err ** (-1.0 / (ERROR_ORDER + 1)))
+                else:
+                    h_prop = h * FAC_MIN
+                if h_prop < h_min:
+                    stats[STAT_REASON] = (REASON_NOT_FINITE if not math.isfinite(err)
+                                          else REASON_STEP_UNDERFLOW)
+                    return FAILED, t, h_prop
+                continue
+            stats[STAT_ACCEPTED] += 1
+            if y1[0] * y1[0] + y1[1] * y1[1] >= r_exit * r_exit:
+                theta = locate_exit(h, y, y1, r_exit)
+                h_exit = theta * h
+                ok = rodas_step(y, f0, t, h_exit, omega0, domega, pp, gp, jac, piv, k, f, ft,
+                                ys, y1)
+                if not ok:
+                    stats[STAT_REASON] = REASON_NOT_FINITE
+                    return FAILED, t, h_prop
+                for i in range(y.shape[0]):
+                    y[i] = y1[i]
+                return EXITED, t + h_exit, h_prop
+            for i in range(y.shape[0]):
+                y[i] = y1[i]
+            fac = step_factor(err)
+            if truncated:
+                t = t_end
+                h_prop = max(h_prop, h * fac)
+            else:
+                t += h
+                h_prop = h * fac
+    return ACTIVE, t, h_prop
+
+
+@jit
+def advance_batch(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, status, t_event,
+                  rtol, atol, h_min, max_steps, stats):
+    """
+    Advance every ACTIVE particle over the interval seg_t[0]..seg_t[-1].
+
+    y (N, 9) cone-axes states, pp (N, PRODUCT_WIDTH) product rows, gp global row, h_prop (N,)
+    proposed step sizes, status (N,) int64, t_event (N,) receives exit or failure times,
+    atol (9,), stats (N, STAT_WIDTH) int64 counters. Arrays are updated in place.
+    """
+    n = STATE_SIZE
+    jac = np.empty((n, n))
+    piv = np.empty(n, dtype=np.int64)
+    k = np.empty((6, n))
+    f = np.empty(n)
+    ft = np.empty(n)
+    ys = np.empty(n)
+    y1 = np.empty(n)
+    f0 = np.empty(n)
+    for p in range(y.shape[0]):
+        if status[p] != ACTIVE:
+            continue
+        st, t_ev, hp = advance_particle(y[p], pp[p], gp, seg_t, seg_omega, seg_domega,
+                                        r_exit, h_prop[p], rtol, atol, h_min, max_steps,
+                                        stats[p], jac, piv, k, f, ft, ys, y1, f0)
+        status[p] = st
+        t_event[p] = t_ev
+        h_prop[p] = hp
