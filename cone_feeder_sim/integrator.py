@@ -34,7 +34,7 @@ import numba
 import numpy as np
 
 from cone_feeder_sim.model import rhs, STATE_SIZE
-from cone_feeder_sim.rosenbrock import ERROR_ORDER, rodas_step
+from cone_feeder_sim.rosenbrock import ERROR_ORDER, prepare_step, rodas_step
 
 jit = numba.njit(cache=True, error_model='numpy')
 
@@ -118,11 +118,14 @@ def locate_exit(h, ya, yb, r_exit):
 
 @jit
 def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rtol, atol,
-                     h_min, max_steps, stats, jac, piv, k, f, ft, ys, y1, f0):
+                     h_min, h_kink, max_steps, stats, work, piv, k, y1, f0):
     """
     Advance one particle through all segments, or until it exits or fails.
 
-    y (9,) is updated in place (cone axes). h_prop is the proposed first step (s).
+    y (9,) is updated in place (cone axes). h_prop is the proposed first step (s); after a
+    jump of the angular acceleration (a kink of omega) the step restarts from at most
+    h_kink, since the jump excites fast friction transients. Step sizes follow the
+    predictive (Gustafsson) controller of Hairer and Wanner's RODAS.
     Returns (status, t_end_or_exit, h_prop): status ACTIVE when the interval was completed,
     EXITED with the exit time (y then holds the state at the exit), or FAILED with the time
     reached (y holds the last accepted state; stats[STAT_REASON] tells why).
@@ -130,18 +133,27 @@ def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rt
     n_seg = seg_omega.shape[0]
     steps = 0
     t = seg_t[0]
+    h_acc = 0.0  # last accepted step and its error, for the predictive controller
+    err_acc = 1.0
     for s in range(n_seg):
         t_seg = seg_t[s]
         t_end = seg_t[s + 1]
         omega_s = seg_omega[s]
         domega = seg_domega[s]
+        if s > 0 and domega != seg_domega[s - 1]:
+            h_prop = min(h_prop, h_kink)
+        fresh = True  # f0 and the Jacobian must be evaluated at the current y
+        rejected = False
         while t < t_end:
             remaining = t_end - t
             truncated = h_prop >= remaining
             h = remaining if truncated else h_prop
             omega0 = omega_s + domega * (t - t_seg)
-            rhs(y, pp, gp, omega0, domega, f0)
-            ok = rodas_step(y, f0, t, h, omega0, domega, pp, gp, jac, piv, k, f, ft, ys, y1)
+            if fresh:
+                rhs(y, pp, gp, omega0, domega, f0)
+                prepare_step(y, omega0, domega, pp, gp, work, k)
+                fresh = False
+            ok = rodas_step(y, f0, h, omega0, domega, pp, gp, work, piv, k, y1)
             err = error_norm(k[5], y, y1, rtol, atol) if ok else np.inf
             steps += 1
             if steps > max_steps:
@@ -153,6 +165,9 @@ def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rt
                     h_prop = h * max(FAC_MIN, SAFETY * err ** (-1.0 / (ERROR_ORDER + 1)))
                 else:
                     h_prop = h * FAC_MIN
+                if rejected:  # repeated rejection: the error model does not hold, cut hard
+                    h_prop = min(h_prop, h * FAC_MIN)
+                rejected = True
                 if h_prop < h_min:
                     stats[STAT_REASON] = (REASON_NOT_FINITE if not math.isfinite(err)
                                           else REASON_STEP_UNDERFLOW)
@@ -162,8 +177,7 @@ def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rt
             if y1[0] * y1[0] + y1[1] * y1[1] >= r_exit * r_exit:
                 theta = locate_exit(h, y, y1, r_exit)
                 h_exit = theta * h
-                ok = rodas_step(y, f0, t, h_exit, omega0, domega, pp, gp, jac, piv, k, f, ft,
-                                ys, y1)
+                ok = rodas_step(y, f0, h_exit, omega0, domega, pp, gp, work, piv, k, y1)
                 if not ok:
                     stats[STAT_REASON] = REASON_NOT_FINITE
                     return FAILED, t, h_prop
@@ -172,19 +186,30 @@ def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rt
                 return EXITED, t + h_exit, h_prop
             for i in range(y.shape[0]):
                 y[i] = y1[i]
-            fac = step_factor(err)
+            fresh = True
+            grow = step_factor(err)
+            if h_acc > 0.0 and err > 0.0:
+                # Gustafsson: also use the error trend of the last two accepted steps
+                pred = SAFETY * (h / h_acc) * (err_acc / (err * err)) ** (
+                    1.0 / (ERROR_ORDER + 1))
+                grow = min(grow, max(FAC_MIN, min(FAC_MAX, pred)))
+            if rejected:
+                grow = min(grow, 1.0)
+            rejected = False
+            h_acc = h
+            err_acc = max(err, 1e-4)
             if truncated:
                 t = t_end
-                h_prop = max(h_prop, h * fac)
+                h_prop = max(h_prop, h * grow)
             else:
                 t += h
-                h_prop = h * fac
+                h_prop = h * grow
     return ACTIVE, t, h_prop
 
 
 @jit
 def advance_batch(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, status, t_event,
-                  rtol, atol, h_min, max_steps, stats):
+                  rtol, atol, h_min, h_kink, max_steps, stats):
     """
     Advance every ACTIVE particle over the interval seg_t[0]..seg_t[-1].
 
@@ -193,20 +218,17 @@ def advance_batch(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, statu
     atol (9,), stats (N, STAT_WIDTH) int64 counters. Arrays are updated in place.
     """
     n = STATE_SIZE
-    jac = np.empty((n, n))
-    piv = np.empty(n, dtype=np.int64)
-    k = np.empty((6, n))
-    f = np.empty(n)
-    ft = np.empty(n)
-    ys = np.empty(n)
+    work = np.empty((2, n, n))
+    piv = np.empty((2, 3), dtype=np.int64)
+    k = np.empty((n, n))
     y1 = np.empty(n)
     f0 = np.empty(n)
     for p in range(y.shape[0]):
         if status[p] != ACTIVE:
             continue
         st, t_ev, hp = advance_particle(y[p], pp[p], gp, seg_t, seg_omega, seg_domega,
-                                        r_exit, h_prop[p], rtol, atol, h_min, max_steps,
-                                        stats[p], jac, piv, k, f, ft, ys, y1, f0)
+                                        r_exit, h_prop[p], rtol, atol, h_min, h_kink, max_steps,
+                                        stats[p], work, piv, k, y1, f0)
         status[p] = st
         t_event[p] = t_ev
         h_prop[p] = hp

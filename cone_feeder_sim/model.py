@@ -265,16 +265,21 @@ def rhs_omega_derivative(y, omega, out):
 
 
 @jit
+def _vec3(a, b, c):
+    return (a, b, c)
+
+
+@jit
 def jacobian(y, pp, gp, omega, domega, jac):
     """
     Write the exact Jacobian d(rhs)/dy, shape (9, 9), of :func:`rhs` into jac.
 
     Derived by hand from the functions above; test_model checks it against finite
     differences for both friction-direction options and both normal-force readings.
+    Allocates nothing (small vectors are tuples), so it is cheap inside the step loop.
     """
     h = gp[G_H]
     k = gp[G_K]
-    tip = gp[G_TIP_EPS]
     eps = gp[G_EPS]
     m = pp[P_M]
     d = pp[P_D]
@@ -287,31 +292,21 @@ def jacobian(y, pp, gp, omega, domega, jac):
     r_f = pp[P_R_F]
     t_f = pp[P_T_F]
     qf = pp[P_QDOT_F]
-    x = y[0:3]
-    w = y[3:6]
-    p = y[6:9]
-    for i in range(9):
-        for j in range(9):
-            jac[i, j] = 0.0
-    # geometry
-    rho = regularised_radius(x[0], x[1], tip)
-    s_perp = x[2] - h + k * rho
-    g = np.empty(3)
-    g[0] = k * x[0] / rho
-    g[1] = k * x[1] / rho
-    g[2] = 1.0
-    hess = np.zeros((3, 3))  # d g / d x (symmetric)
+    x0, x1, x2 = y[0], y[1], y[2]
+    w = _vec3(y[3], y[4], y[5])
+    p = _vec3(y[6], y[7], y[8])
+    # geometry: g = grad s_perp = e_Fc, hess = d g / d x (only the x-y block is non-zero)
+    rho = regularised_radius(x0, x1, gp[G_TIP_EPS])
+    s_perp = x2 - h + k * rho
+    g = _vec3(k * x0 / rho, k * x1 / rho, 1.0)
     rho3 = rho * rho * rho
-    hess[0, 0] = k * (1.0 / rho - x[0] * x[0] / rho3)
-    hess[0, 1] = -k * x[0] * x[1] / rho3
-    hess[1, 0] = hess[0, 1]
-    hess[1, 1] = k * (1.0 / rho - x[1] * x[1] / rho3)
+    h00 = k * (1.0 / rho - x0 * x0 / rho3)
+    h01 = -k * x0 * x1 / rho3
+    h11 = k * (1.0 / rho - x1 * x1 / rho3)
+    hess = (_vec3(h00, h01, 0.0), _vec3(h01, h11, 0.0), _vec3(0.0, 0.0, 0.0))
     v_perp = g[0] * w[0] + g[1] * w[1] + g[2] * w[2]
-    hw = np.empty(3)  # d v_perp / d x
-    hg = np.empty(3)
-    for i in range(3):
-        hw[i] = hess[i, 0] * w[0] + hess[i, 1] * w[1]
-        hg[i] = hess[i, 0] * g[0] + hess[i, 1] * g[1]
+    hw = _vec3(h00 * w[0] + h01 * w[1], h01 * w[0] + h11 * w[1], 0.0)  # d v_perp / d x
+    hg = _vec3(h00 * g[0] + h01 * g[1], h01 * g[0] + h11 * g[1], 0.0)
     # normal force and its gradients
     th_a = math.tanh(r_t * (s_perp - pp[P_R_C]))
     r_a_act = 0.5 * (1.0 - th_a)
@@ -320,34 +315,38 @@ def jacobian(y, pp, gp, omega, domega, jac):
     f_c = 0.5 * r_f * (1.0 - th_c)
     dfc_dv = -0.5 * r_f * r_d * (1.0 - th_c * th_c)
     n_force = r_a_act * f_c
-    dn_dx = np.empty(3)
-    dn_dw = np.empty(3)
-    dra_dx = np.empty(3)
-    for i in range(3):
-        dra_dx[i] = dra_ds * g[i]
-        dn_dx[i] = f_c * dra_dx[i] + r_a_act * dfc_dv * hw[i]
-        dn_dw[i] = r_a_act * dfc_dv * g[i]
+    dra_dx = _vec3(dra_ds * g[0], dra_ds * g[1], dra_ds * g[2])
+    dn_dx = _vec3(f_c * dra_dx[0] + r_a_act * dfc_dv * hw[0],
+                  f_c * dra_dx[1] + r_a_act * dfc_dv * hw[1],
+                  f_c * dra_dx[2] + r_a_act * dfc_dv * hw[2])
+    cw = r_a_act * dfc_dv
+    dn_dw = _vec3(cw * g[0], cw * g[1], cw * g[2])
     nscale = 1.0 / r_f if gp[G_LITERAL] != 0.0 else 1.0
     n_fric = n_force * nscale
-    # friction velocity u and its Jacobians
-    du_dx = np.zeros((3, 3))
-    du_dw = np.zeros((3, 3))
-    u = np.empty(3)
+    # friction velocity u and its Jacobians du/dx, du/dw
     if gp[G_TANGENTIAL] != 0.0:
         gn2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2]
         c = v_perp / gn2
-        for i in range(3):
-            u[i] = w[i] - c * g[i]
-            for j in range(3):
-                du_dw[i, j] = (1.0 if i == j else 0.0) - g[i] * g[j] / gn2
-                du_dx[i, j] = (-(g[i] * hw[j] + v_perp * hess[i, j]) / gn2
-                               + 2.0 * v_perp * g[i] * hg[j] / (gn2 * gn2))
+        u = _vec3(w[0] - c * g[0], w[1] - c * g[1], w[2] - c * g[2])
+        c2 = 2.0 * v_perp / (gn2 * gn2)
+        du_dw = (_vec3(1.0 - g[0] * g[0] / gn2, -g[0] * g[1] / gn2, -g[0] * g[2] / gn2),
+                 _vec3(-g[1] * g[0] / gn2, 1.0 - g[1] * g[1] / gn2, -g[1] * g[2] / gn2),
+                 _vec3(-g[2] * g[0] / gn2, -g[2] * g[1] / gn2, 1.0 - g[2] * g[2] / gn2))
+        du_dx = (_vec3(-(g[0] * hw[0] + v_perp * hess[0][0]) / gn2 + c2 * g[0] * hg[0],
+                       -(g[0] * hw[1] + v_perp * hess[0][1]) / gn2 + c2 * g[0] * hg[1],
+                       -(g[0] * hw[2] + v_perp * hess[0][2]) / gn2 + c2 * g[0] * hg[2]),
+                 _vec3(-(g[1] * hw[0] + v_perp * hess[1][0]) / gn2 + c2 * g[1] * hg[0],
+                       -(g[1] * hw[1] + v_perp * hess[1][1]) / gn2 + c2 * g[1] * hg[1],
+                       -(g[1] * hw[2] + v_perp * hess[1][2]) / gn2 + c2 * g[1] * hg[2]),
+                 _vec3(-(g[2] * hw[0] + v_perp * hess[2][0]) / gn2 + c2 * g[2] * hg[0],
+                       -(g[2] * hw[1] + v_perp * hess[2][1]) / gn2 + c2 * g[2] * hg[1],
+                       -(g[2] * hw[2] + v_perp * hess[2][2]) / gn2 + c2 * g[2] * hg[2]))
     else:
-        for i in range(3):
-            u[i] = w[i]
-            du_dw[i, i] = 1.0
+        u = w
+        du_dw = (_vec3(1.0, 0.0, 0.0), _vec3(0.0, 1.0, 0.0), _vec3(0.0, 0.0, 1.0))
+        du_dx = (_vec3(0.0, 0.0, 0.0), _vec3(0.0, 0.0, 0.0), _vec3(0.0, 0.0, 0.0))
     v = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
-    # friction magnitude phi(v, N, R_a) and psi = phi / (v + eps)
+    # friction magnitude phi(v, N, R_a) and psi = phi / (v + eps); Q_s = -psi u
     xi = v / v_s
     ex = math.exp(0.5 - 0.5 * xi * xi)
     sig = xi * ex
@@ -356,50 +355,34 @@ def jacobian(y, pp, gp, omega, domega, jac):
     f_delta = c_s * n_fric - r_a_act * d * v_s
     phi = r_a_act * d * v + mu_c * n_fric * th_v + f_delta * sig
     dphi_dv = r_a_act * d + mu_c * n_fric * (1.0 - th_v * th_v) / v_c + f_delta * dsig
-    dphi_dn = mu_c * th_v + c_s * sig
+    dphi_dn = (mu_c * th_v + c_s * sig) * nscale
     dphi_dra = d * v - d * v_s * sig
     ve = v + eps
     psi = phi / ve
     dpsi_dv = dphi_dv / ve - phi / (ve * ve)
     dpsi_dn = dphi_dn / ve
     dpsi_dra = dphi_dra / ve
-    # gradient of v with respect to x and w (zero where u = 0)
-    dv_dx = np.zeros(3)
-    dv_dw = np.zeros(3)
-    if v > 0.0:
-        for j in range(3):
-            for i in range(3):
-                dv_dx[j] += u[i] * du_dx[i, j] / v
-                dv_dw[j] += u[i] * du_dw[i, j] / v
-    dpsi_dx = np.empty(3)
-    dpsi_dw = np.empty(3)
-    for j in range(3):
-        dpsi_dx[j] = dpsi_dv * dv_dx[j] + dpsi_dn * nscale * dn_dx[j] + dpsi_dra * dra_dx[j]
-        dpsi_dw[j] = dpsi_dv * dv_dw[j] + dpsi_dn * nscale * dn_dw[j]
-    # Q_s = -psi u
-    qs = np.empty(3)
-    for i in range(3):
-        qs[i] = -psi * u[i]
+    inv_v = 1.0 / v if v > 0.0 else 0.0  # grad v = u^T du/dz / v, taken as 0 where u = 0
     # filter gain a(|w|)
-    v_full2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
-    ea = math.exp(-v_full2 / (qf * qf))
-    a = 1.0 - ea
-    rate = a / t_f
-    # block rows
-    for i in range(3):
-        jac[i, 3 + i] = 1.0
-        for j in range(3):
-            # d wdot / d x, d wdot / d w
-            jac[3 + i, j] = (g[i] * dn_dx[j] + n_force * hess[i, j]) / m
+    ea = math.exp(-(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / (qf * qf))
+    rate = (1.0 - ea) / t_f
+    da = 2.0 * ea / (qf * qf * t_f)
+    for j in range(3):
+        dv_dx_j = (u[0] * du_dx[0][j] + u[1] * du_dx[1][j] + u[2] * du_dx[2][j]) * inv_v
+        dv_dw_j = (u[0] * du_dw[0][j] + u[1] * du_dw[1][j] + u[2] * du_dw[2][j]) * inv_v
+        dpsi_dx_j = dpsi_dv * dv_dx_j + dpsi_dn * dn_dx[j] + dpsi_dra * dra_dx[j]
+        dpsi_dw_j = dpsi_dv * dv_dw_j + dpsi_dn * dn_dw[j]
+        for i in range(3):
+            jac[i, j] = 0.0
+            jac[i, 3 + j] = 1.0 if i == j else 0.0
+            jac[i, 6 + j] = 0.0
+            jac[3 + i, j] = (g[i] * dn_dx[j] + n_force * hess[i][j]) / m
             jac[3 + i, 3 + j] = g[i] * dn_dw[j] / m
-            # d Pdot / d x, d Pdot / d w
-            dqs_dx = -u[i] * dpsi_dx[j] - psi * du_dx[i, j]
-            dqs_dw = -u[i] * dpsi_dw[j] - psi * du_dw[i, j]
-            da_dw = ea * 2.0 * w[j] / (qf * qf)
-            jac[6 + i, j] = rate * dqs_dx
-            jac[6 + i, 3 + j] = (qs[i] - p[i]) * da_dw / t_f + rate * dqs_dw
-        jac[3 + i, 6 + i] = 1.0 / m
-        jac[6 + i, 6 + i] = -rate
+            jac[3 + i, 6 + j] = 1.0 / m if i == j else 0.0
+            jac[6 + i, j] = rate * (-u[i] * dpsi_dx_j - psi * du_dx[i][j])
+            jac[6 + i, 3 + j] = ((-psi * u[i] - p[i]) * da * w[j]
+                                 + rate * (-u[i] * dpsi_dw_j - psi * du_dw[i][j]))
+            jac[6 + i, 6 + j] = -rate if i == j else 0.0
     # rotating-frame terms
     om2 = omega * omega
     jac[3, 0] += om2

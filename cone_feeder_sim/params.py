@@ -345,7 +345,8 @@ class SolverParams:
     Tolerances and limits of the adaptive Rosenbrock integrator.
 
     rtol: relative tolerance; atol_position (m), atol_velocity (m/s), atol_force (N):
-    absolute tolerances of the three blocks of the state; h_init (s) first trial step;
+    absolute tolerances of the three blocks of the state; h_init (s) first trial step, and
+    the largest step tried right after a jump of the cone's angular acceleration;
     h_min (s) smallest step before a particle is declared failed; max_steps: accepted plus
     rejected steps allowed per particle and call.
     """

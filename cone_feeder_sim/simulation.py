@@ -260,7 +260,7 @@ def advance(state: SimState, setup: Setup, profile: RotationProfile,
     if n:
         advance_batch(y, state.products, setup.global_row, seg_t, seg_omega, seg_domega,
                       setup.model.r, h, status, t_event, solver.rtol, setup.atol,
-                      solver.h_min, solver.max_steps, stats)
+                      solver.h_min, solver.h_init, solver.max_steps, stats)
     exits = _exit_events(state, setup, profile, y, status, t_event)
     failures = tuple(
         Failure(id=int(state.ids[i]), t=float(t_event[i]),
