@@ -1,0 +1,114 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The command line: `cone-feeder-sim run SCENARIO.yaml --events EVENTS.csv`.
+
+Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors.
+"""
+
+import argparse
+import sys
+import time
+from typing import Sequence, TextIO
+
+from cone_feeder_sim import __version__
+from cone_feeder_sim.errors import ConeFeederError
+from cone_feeder_sim.events_io import write_events_csv
+from cone_feeder_sim.runner import run_scenario
+from cone_feeder_sim.scenario import load_scenario, Scenario
+from cone_feeder_sim.simulation import Simulator, StepResult
+
+
+class ProgressBar:
+    """A text progress bar on a stream: redrawn in place on a terminal, else every 10%."""
+
+    def __init__(self, total: float, stream: TextIO, width: int = 30) -> None:
+        """Prepare a bar for a run of `total` simulated seconds."""
+        self.total = total
+        self.stream = stream
+        self.width = width
+        self.tty = stream.isatty()
+        self.exits = 0
+        self.last_draw = 0.0
+        self.last_decile = -1
+        self.start = time.monotonic()
+
+    def __call__(self, t: float, sim: Simulator, step: StepResult) -> None:
+        """Update after an output interval."""
+        self.exits += len(step.exits)
+        frac = min(1.0, t / self.total)
+        now = time.monotonic()
+        decile = int(frac * 10)
+        if self.tty and (now - self.last_draw < 0.1 and frac < 1.0):
+            return
+        if not self.tty and decile == self.last_decile:
+            return
+        self.last_draw = now
+        self.last_decile = decile
+        filled = int(round(frac * self.width))
+        line = (f'[{"#" * filled}{"." * (self.width - filled)}] {100 * frac:5.1f}% '
+                f't={t:.3f}/{self.total:.3f} s pieces={sim.state.count} exits={self.exits} '
+                f'wall={now - self.start:.1f} s')
+        self.stream.write(('\r' + line) if self.tty else (line + '\n'))
+        if self.tty and frac >= 1.0:
+            self.stream.write('\n')
+        self.stream.flush()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of the command line."""
+    parser = argparse.ArgumentParser(
+        prog='cone-feeder-sim',
+        description='Simulate pieces of product on the rotating cone feeder of a multihead '
+                    'weigher.')
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
+    sub = parser.add_subparsers(dest='command', required=True)
+    run = sub.add_parser('run', help='run a scenario headless and write its exit events')
+    run.add_argument('scenario', help='scenario YAML file')
+    run.add_argument('--events', required=True, help='CSV file for the exit events')
+    run.add_argument('--quiet', action='store_true', help='no progress bar')
+    return parser
+
+
+def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
+    """Run a scenario; return the exit code."""
+    scenario: Scenario = load_scenario(args.scenario)
+    progress = None if args.quiet else ProgressBar(scenario.duration, err)
+    result = run_scenario(scenario, progress)
+    rows = write_events_csv(args.events, result.exit_table())
+    for failure in result.failures:
+        err.write(f'warning: particle {failure.id} removed at t={failure.t:.6f} s: '
+                  f'{failure.reason}\n')
+    err.write(f'{rows} of {len(scenario.particles)} pieces left the cone; '
+              f'{result.remaining_ids.size} still on it, {len(result.failures)} failed; '
+              f'events written to {args.events}\n')
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of `cone-feeder-sim`."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        if args.command == 'run':
+            return cmd_run(args, sys.stderr)
+    except ConeFeederError as exc:
+        sys.stderr.write(f'error: {exc}\n')
+        return 2
+    return 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,47 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Setup script of the ament_python package cone_feeder_sim."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'cone_feeder_sim'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+    ],
+    # The ROS 2 Python packages (rclpy, message packages) come from the ROS installation
+    # (apt) or from the PyPI ros-jazzy-* wheels; they are deliberately not listed here.
+    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'numba', 'mcap'],
+    zip_safe=True,
+    maintainer='cone_feeder_sim maintainers',
+    maintainer_email='maintainers@cone-feeder-sim.invalid',
+    description='Simulation of product pieces on the rotating cone feeder of a multihead '
+                'weigher, with a ROS 2 node and MCAP logging.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'cone-feeder-sim = cone_feeder_sim.cli:main',
+        ],
+    },
+)
