@@ -23,12 +23,12 @@ import sys
 import time
 from typing import Sequence, TextIO
 
-from cone_feeder_sim import __version__
-from cone_feeder_sim.errors import ConeFeederError
-from cone_feeder_sim.events_io import write_events_csv
-from cone_feeder_sim.runner import run_scenario
-from cone_feeder_sim.scenario import load_scenario, Scenario
-from cone_feeder_sim.simulation import Simulator, StepResult
+from . import __version__
+from .errors import ConeFeederError
+from .events_io import write_events_csv
+from .runner import run_scenario
+from .scenario import load_scenario, Scenario
+from .simulation import Simulator, StepResult
 
 
 class ProgressBar:
@@ -89,7 +89,7 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
     result = run_scenario(scenario, progress)
     rows = write_events_csv(args.events, result.exit_table())
     for failure in result.failures:
-        err.write(f'warning: particle {failure.id} removed at t={failure.t:.6f} s: '
+        err.write(f'warning: particle {failure.particle_id} removed at t={failure.t:.6f} s: '
                   f'{failure.reason}\n')
     err.write(f'{rows} of {len(scenario.particles)} pieces left the cone; '
               f'{result.remaining_ids.size} still on it, {len(result.failures)} failed; '

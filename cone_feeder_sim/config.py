@@ -25,8 +25,8 @@ from typing import Any, Mapping
 
 import yaml
 
-from cone_feeder_sim.errors import ParameterError
-from cone_feeder_sim.params import model_params_from_mapping, ModelParams, SolverParams
+from .errors import ParameterError
+from .params import model_params_from_mapping, ModelParams, SolverParams
 
 PACKAGE = 'cone_feeder_sim'
 DEFAULT_PARAMETER_FILE = 'table2.yaml'

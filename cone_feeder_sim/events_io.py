@@ -20,7 +20,7 @@ from typing import Mapping
 
 import numpy as np
 
-from cone_feeder_sim.errors import ConeFeederError
+from .errors import ConeFeederError
 
 EVENT_COLUMNS = ('particle', 't', 'angle_deg', 'channel', 'x', 'y', 'z', 'vx', 'vy', 'vz',
                  'mass')

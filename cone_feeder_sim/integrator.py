@@ -33,8 +33,8 @@ import math
 import numba
 import numpy as np
 
-from cone_feeder_sim.model import rhs, STATE_SIZE
-from cone_feeder_sim.rosenbrock import ERROR_ORDER, prepare_step, rodas_step
+from .model import rhs, STATE_SIZE
+from .rosenbrock import ERROR_ORDER, prepare_step, rodas_step
 
 jit = numba.njit(cache=True, error_model='numpy')
 

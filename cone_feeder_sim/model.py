@@ -37,9 +37,8 @@ compiled with numba (no Python objects), so the integrator can call them per par
 import math
 
 import numba
-import numpy as np
 
-from cone_feeder_sim.params import (
+from .params import (
     G_EPS, G_G, G_H, G_K, G_LITERAL, G_TANGENTIAL, G_TIP_EPS, P_C_S, P_D, P_M, P_MU_C,
     P_QDOT_F, P_R_C, P_R_D, P_R_F, P_R_T, P_T_F, P_V_C, P_V_S)
 

@@ -30,7 +30,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from cone_feeder_sim.errors import ParameterError
+from .errors import ParameterError
 
 
 @dataclass(frozen=True)
@@ -148,17 +148,17 @@ class ProductParams:
 
     @property
     def s_c(self) -> float:
-        """Compression radius s_c (m)."""
+        """Return the compression radius in m, the paper's s_c."""
         return self.s_c_ratio * self.s0
 
     @property
     def r_t(self) -> float:
-        """Transition coefficient r_t (1/m), eq. 32."""
+        """Return the transition coefficient in 1/m, the paper's r_t of eq. 32."""
         return 2.0 * math.atanh(self.r_a) / (self.s0 - self.s_c)
 
     @property
     def r_c(self) -> float:
-        """Constraint offset r_c (m), eq. 33."""
+        """Return the constraint offset in m, the paper's r_c of eq. 33."""
         return 0.5 * (self.s0 + self.s_c)
 
     def with_overrides(self, overrides: Mapping[str, Any]) -> 'ProductParams':
@@ -285,7 +285,7 @@ class ModelParams:
 
     @property
     def r(self) -> float:
-        """Cone radius r (m)."""
+        """Return the cone radius in m."""
         return 0.5 * self.cone_diameter
 
     @property

@@ -31,7 +31,7 @@ checks the order of convergence on problems with exact solutions.
 import numba
 import numpy as np
 
-from cone_feeder_sim.model import jacobian, rhs, rhs_omega_derivative, STATE_SIZE
+from .model import jacobian, rhs, rhs_omega_derivative
 
 jit = numba.njit(cache=True, error_model='numpy')
 
@@ -215,8 +215,10 @@ def solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, kk, r):
 @jit
 def prepare_step(y0, omega0, domega, pp, gp, work, k):
     """
-    Evaluate what a step from y0 needs whatever its size: the Jacobian into work[0] and the
-    time derivative of the field, domega * df/domega, into k[7].
+    Evaluate what a step from y0 needs, whatever its size.
+
+    The Jacobian goes into work[0] and the time derivative of the field,
+    domega * df/domega, into k[7].
 
     A rejected step is retried with the same Jacobian: only W = I/(gamma h) - J changes.
     """

@@ -27,7 +27,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from cone_feeder_sim.errors import ParameterError
+from .errors import ParameterError
 
 
 @dataclass(frozen=True)
@@ -89,7 +89,7 @@ class RotationProfile:
         return cls(np.array([0.0]), np.array([float(omega)]))
 
     def omega(self, t: float) -> float:
-        """Return omega(t) (rad/s)."""
+        """Return the angular velocity at time t (rad/s)."""
         return float(np.interp(t, self.times, self.omegas))
 
     def _angle_from_start(self, t: float) -> float:

@@ -25,8 +25,8 @@ from typing import Callable
 
 import numpy as np
 
-from cone_feeder_sim.scenario import Scenario
-from cone_feeder_sim.simulation import ExitEvents, Failure, Setup, Simulator, StepResult
+from .scenario import Scenario
+from .simulation import ExitEvents, Failure, Setup, Simulator, StepResult
 
 
 @dataclass

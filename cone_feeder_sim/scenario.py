@@ -39,11 +39,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from cone_feeder_sim.config import load_model_params, read_yaml, solver_params_from_mapping
-from cone_feeder_sim.errors import ConeFeederError, ScenarioError
-from cone_feeder_sim.params import ModelParams, PRODUCT_LIMITS, ProductParams, SolverParams
-from cone_feeder_sim.rotation import RotationProfile
-from cone_feeder_sim.simulation import check_positions
+from .config import load_model_params, read_yaml, solver_params_from_mapping
+from .errors import ConeFeederError, ScenarioError
+from .params import ModelParams, PRODUCT_LIMITS, ProductParams, SolverParams
+from .rotation import RotationProfile
+from .simulation import check_positions
 
 SCENARIO_KEYS = ('duration', 'parameters', 'model', 'solver', 'output_interval', 'rotation',
                  'particles')

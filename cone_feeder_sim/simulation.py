@@ -30,14 +30,14 @@ from typing import Sequence
 
 import numpy as np
 
-from cone_feeder_sim.errors import ScenarioError
-from cone_feeder_sim.integrator import (
+from .errors import ScenarioError
+from .integrator import (
     ACTIVE, advance_batch, EXITED, FAILED, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW,
     REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED, STAT_WIDTH)
-from cone_feeder_sim.model import STATE_SIZE
-from cone_feeder_sim.params import (
+from .model import STATE_SIZE
+from .params import (
     ModelParams, P_M, product_row, PRODUCT_WIDTH, ProductParams, SolverParams)
-from cone_feeder_sim.rotation import rotate_z, RotationProfile
+from .rotation import rotate_z, RotationProfile
 
 FAILURE_REASONS = {
     REASON_STEP_UNDERFLOW: 'step size fell below h_min',
@@ -85,7 +85,7 @@ class SimState:
 
     @property
     def count(self) -> int:
-        """Number of particles on the cone."""
+        """Return the number of particles on the cone."""
         return int(self.ids.shape[0])
 
 
@@ -116,7 +116,7 @@ class ExitEvents:
 class Failure:
     """A particle whose integration failed and which was removed."""
 
-    id: int
+    particle_id: int
     t: float
     reason: str
     position: tuple[float, float, float]
@@ -263,7 +263,7 @@ def advance(state: SimState, setup: Setup, profile: RotationProfile,
                       solver.h_min, solver.h_init, solver.max_steps, stats)
     exits = _exit_events(state, setup, profile, y, status, t_event)
     failures = tuple(
-        Failure(id=int(state.ids[i]), t=float(t_event[i]),
+        Failure(particle_id=int(state.ids[i]), t=float(t_event[i]),
                 reason=FAILURE_REASONS.get(int(stats[i, STAT_REASON]), 'unknown'),
                 position=tuple(float(v) for v in rotate_z(
                     y[i, 0:3], state.angle + profile.integral(state.t, t_event[i]))))
@@ -311,11 +311,11 @@ class Simulator:
 
     @property
     def t(self) -> float:
-        """Simulation time (s)."""
+        """Return the simulation time (s)."""
         return self.state.t
 
     def omega(self) -> float:
-        """Cone angular velocity now (rad/s)."""
+        """Return the cone angular velocity now (rad/s)."""
         return self.profile.omega(self.state.t)
 
     def add(self, positions: object, velocities: object | None = None,

@@ -41,8 +41,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.integrate import OdeSolution, solve_ivp
-
-# Per-sample damping d (N s/m) of Table II, samples 1..5.
 SAMPLE_DAMPING: dict[int, float] = {1: 225.0, 2: 135.0, 3: 750.0, 4: 750.0, 5: 30.0}
 
 # Start positions (m) of Table I, samples 1..5.

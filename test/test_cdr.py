@@ -25,12 +25,7 @@ import importlib
 import types
 from typing import Any
 
-import numpy as np
-import pytest
-from rosbags.typesys import get_types_from_msg, get_typestore
-from rosbags.typesys.stores import Stores
-
-from cone_feeder_sim.cdr import (  # noqa: I100 - ament's flake8 sees cone_feeder_sim as 3rd party
+from cone_feeder_sim.cdr import (
     CdrCodec,
     CdrError,
     decode,
@@ -39,6 +34,10 @@ from cone_feeder_sim.cdr import (  # noqa: I100 - ament's flake8 sees cone_feede
     encode,
 )
 from cone_feeder_sim.msgdefs import MessageDefinitionRegistry
+import numpy as np
+import pytest
+from rosbags.typesys import get_types_from_msg, get_typestore
+from rosbags.typesys.stores import Stores
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 

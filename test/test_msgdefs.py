@@ -25,11 +25,7 @@ import pathlib
 import re
 import sys
 
-import pytest
-from rosbags.typesys import get_types_from_msg, get_typestore
-from rosbags.typesys.stores import Stores
-
-from cone_feeder_sim import msgdefs  # noqa: I100 - ament's flake8 sees it as 3rd party
+from cone_feeder_sim import msgdefs
 from cone_feeder_sim.errors import ConeFeederError
 from cone_feeder_sim.msgdefs import (
     ArrayKind,
@@ -37,6 +33,9 @@ from cone_feeder_sim.msgdefs import (
     MessageDefinitionError,
     MessageDefinitionRegistry,
 )
+import pytest
+from rosbags.typesys import get_types_from_msg, get_typestore
+from rosbags.typesys.stores import Stores
 
 REQUIRED_TYPES = [
     'std_msgs/msg/Float64',

@@ -32,6 +32,15 @@ import sys
 import textwrap
 from typing import Any
 
+from cone_feeder_sim.cdr import decode, default_message
+from cone_feeder_sim.errors import ConeFeederError
+from cone_feeder_sim.msgdefs import get_full_text
+from cone_feeder_sim.recording import (
+    McapRecorder,
+    QosProfile,
+    RecordingError,
+    recover_mcap,
+)
 import mcap.exceptions
 import mcap.reader
 import numpy as np
@@ -41,16 +50,6 @@ from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReli
 from rosbags.rosbag2.metadata import parse_qos
 from yaml import safe_load
 from zstandard import ZstdError
-
-from cone_feeder_sim.cdr import decode, default_message  # noqa: I100 - 3rd party to ament
-from cone_feeder_sim.errors import ConeFeederError
-from cone_feeder_sim.msgdefs import get_full_text
-from cone_feeder_sim.recording import (
-    McapRecorder,
-    QosProfile,
-    RecordingError,
-    recover_mcap,
-)
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 READ_ERRORS = (mcap.exceptions.McapError, ValueError, struct.error, ZstdError)

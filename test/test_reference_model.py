@@ -25,8 +25,6 @@ from typing import Any
 import numpy as np
 import pytest
 import reference_model as rm
-
-# Table II values written out independently of table2_params.
 R_CONE = 0.225
 H_CONE = 0.225 * math.tan(7.5 * math.pi / 180.0)
 R_T = math.log((1.0 + 0.99) / (1.0 - 0.99)) / (0.025 - 0.0125)   # 2 artanh(x) = ln(...)
