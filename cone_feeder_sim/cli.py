@@ -19,9 +19,10 @@ Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors.
 """
 
 import argparse
+from collections.abc import Sequence
 import sys
 import time
-from typing import Sequence, TextIO
+from typing import TextIO
 
 from . import __version__
 from .errors import ConeFeederError

@@ -19,9 +19,10 @@ All file I/O of configuration lives here; validation is done by the parameter cl
 cone_feeder_sim.params, which this module feeds with plain mappings.
 """
 
+from collections.abc import Mapping
 from pathlib import Path
 import sys
-from typing import Any, Mapping
+from typing import Any
 
 import yaml
 

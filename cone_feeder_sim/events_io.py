@@ -14,9 +14,9 @@
 
 """Writing exit events to CSV: one row per piece that left the cone."""
 
+from collections.abc import Mapping
 import csv
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 

@@ -176,8 +176,8 @@ def rhs_world(y, pp, gp, omega, out):
     s_perp, rho = cone_distance(y[0], y[1], y[2], h, k, gp[G_TIP_EPS])
     e0, e1, e2 = constraint_direction(y[0], y[1], k, rho)
     v_perp = normal_velocity(y[0], y[1], y[3], y[4], y[5], k, rho)
-    r_a_act, f_c, n_force = normal_force(s_perp, v_perp, pp[P_R_T], pp[P_R_C], pp[P_R_D],
-                                         pp[P_R_F])
+    r_a_act, _, n_force = normal_force(s_perp, v_perp, pp[P_R_T], pp[P_R_C], pp[P_R_D],
+                                       pp[P_R_F])
     n_fric = n_force / pp[P_R_F] if gp[G_LITERAL] != 0.0 else n_force
     u0, u1, u2 = relative_velocity(y[0:3], y[3:6], omega)
     v_full = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
@@ -218,8 +218,8 @@ def rhs(y, pp, gp, omega, domega, out):
     s_perp, rho = cone_distance(x0, x1, x2, h, k, gp[G_TIP_EPS])
     e0, e1, e2 = constraint_direction(x0, x1, k, rho)
     v_perp = normal_velocity(x0, x1, w0, w1, w2, k, rho)
-    r_a_act, f_c, n_force = normal_force(s_perp, v_perp, pp[P_R_T], pp[P_R_C], pp[P_R_D],
-                                         pp[P_R_F])
+    r_a_act, _, n_force = normal_force(s_perp, v_perp, pp[P_R_T], pp[P_R_C], pp[P_R_D],
+                                       pp[P_R_F])
     n_fric = n_force / pp[P_R_F] if gp[G_LITERAL] != 0.0 else n_force
     v_full = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
     u0, u1, u2 = w0, w1, w2

@@ -24,9 +24,10 @@ mix products: :class:`ProductParams` holds one product, and the simulator stores
 :func:`product_row` per particle.
 """
 
+from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 import math
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 

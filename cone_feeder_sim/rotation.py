@@ -21,9 +21,10 @@ omega > 0 turns the cone counter-clockwise seen from above (REP-103); the paper'
 quadratic): no numerical integration error enters the cone angle.
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 import math
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 

@@ -20,8 +20,8 @@ The loop is shared by the command line and the tests. It advances a
 scenario), collects the exit events and failures, and reports progress.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

@@ -32,10 +32,11 @@ A scenario is a YAML mapping::
 Every problem is reported with its location (e.g. `particles[2].position`).
 """
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 import math
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 

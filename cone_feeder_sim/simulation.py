@@ -24,9 +24,9 @@ Positions and velocities at this interface are in the world frame (z up, origin 
 centre of the cone base); the integrator works in cone axes (see cone_feeder_sim.model).
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 import math
-from typing import Sequence
 
 import numpy as np
 

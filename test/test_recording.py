@@ -299,7 +299,7 @@ def test_truncated_file_keeps_complete_chunks(tmp_path: pathlib.Path) -> None:
         messages = stream_messages(snapshot[:cut])
         assert [log_time for _, log_time, _ in messages] == [
             100 + index for index in range(3 * complete)], cut
-        for topic, log_time, data in messages:
+        for _topic, log_time, data in messages:
             assert decode('std_msgs/msg/String', data) == written[log_time - 100][2]
     for cut in (ends[1] + 5, ends[2], len(snapshot) - 1):
         truncated = tmp_path / f'cut_{cut}.mcap'
