@@ -53,9 +53,10 @@ pieces again.
 No wall clock is read here: timing belongs to the caller (the ROS node).
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 import math
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
