@@ -112,7 +112,11 @@ def lu_solve(lu, piv, b):
 
 @jit
 def solve3(lu, piv, b0, b1, b2):
-    """Solve a 3x3 system factored by :func:`lu_factor`; return the solution as a tuple."""
+    """
+    Solve a 3x3 system factored by :func:`factor3`; return the solution as a tuple.
+
+    The diagonal of lu holds the reciprocals of the pivots, so no division is needed.
+    """
     # row interchanges, in the order the factorisation made them
     p = piv[0]
     if p == 1:
@@ -123,10 +127,20 @@ def solve3(lu, piv, b0, b1, b2):
         b1, b2 = b2, b1
     b1 -= lu[1, 0] * b0
     b2 -= lu[2, 0] * b0 + lu[2, 1] * b1
-    b2 /= lu[2, 2]
-    b1 = (b1 - lu[1, 2] * b2) / lu[1, 1]
-    b0 = (b0 - lu[0, 1] * b1 - lu[0, 2] * b2) / lu[0, 0]
+    b2 *= lu[2, 2]
+    b1 = (b1 - lu[1, 2] * b2) * lu[1, 1]
+    b0 = (b0 - lu[0, 1] * b1 - lu[0, 2] * b2) * lu[0, 0]
     return b0, b1, b2
+
+
+@jit
+def factor3(a, piv):
+    """Factor a 3x3 matrix in place like :func:`lu_factor`, then invert its pivots."""
+    if not lu_factor(a, piv):
+        return False
+    for i in range(3):
+        a[i, i] = 1.0 / a[i, i]
+    return True
 
 
 @jit
@@ -137,7 +151,7 @@ def factor_mechanical(jac, alpha, lu_m, lu_s, tmat, piv_m, piv_s):
     J (9, 9) must have the block rows [0, I, 0] (dx/dt = w), [A, B, C] and [D, E, F] for
     the state blocks (x, w, P). Eliminating x and P leaves two 3x3 systems:
     M = alpha I - F and the Schur complement S = alpha I - B - A/alpha - C M^-1 (D/alpha + E).
-    lu_m, lu_s (3, 3) receive LU(M) and LU(S), tmat (3, 3) scratch, piv_m, piv_s (3,) the
+    lu_m, lu_s (3, 3) receive LU(M) and LU(S) (see :func:`factor3`), tmat (3, 3) scratch, piv_m, piv_s (3,) the
     pivots. Much cheaper than a dense 9x9 factorisation; test_rosenbrock compares it with
     a dense solve. Returns False if a pivot vanishes or is not finite.
     """
@@ -146,7 +160,7 @@ def factor_mechanical(jac, alpha, lu_m, lu_s, tmat, piv_m, piv_s):
         for j in range(3):
             lu_m[i, j] = -jac[6 + i, 6 + j]
         lu_m[i, i] += alpha
-    if not lu_factor(lu_m, piv_m):
+    if not factor3(lu_m, piv_m):
         return False
     for j in range(3):
         c0, c1, c2 = solve3(lu_m, piv_m, jac[6, j] * inv_a + jac[6, 3 + j],
@@ -161,7 +175,7 @@ def factor_mechanical(jac, alpha, lu_m, lu_s, tmat, piv_m, piv_s):
                           - jac[3 + i, 6] * tmat[0, j] - jac[3 + i, 7] * tmat[1, j]
                           - jac[3 + i, 8] * tmat[2, j])
         lu_s[i, i] += alpha
-    return lu_factor(lu_s, piv_s)
+    return factor3(lu_s, piv_s)
 
 
 @jit

@@ -1,0 +1,12 @@
+#!/usr/bin/env bash
+# Create (or update) the virtual environment .venv with everything cone_feeder_sim needs:
+# the ROS 2 Jazzy Python wheels from PyPI, the run-time dependencies, the test tools, and
+# the package itself (editable). Safe to run again.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PYTHON="${PYTHON:-python3}"
+if [ ! -x .venv/bin/python ]; then
+  "$PYTHON" -m venv .venv
+fi
+.venv/bin/python -m pip install --disable-pip-version-check -q -r requirements/test.txt
+.venv/bin/python -m pip install --disable-pip-version-check -q --no-deps -e .
