@@ -42,6 +42,8 @@ setup(
     entry_points={
         'console_scripts': [
             'cone-feeder-sim = cone_feeder_sim.cli:main',
+            'sim_node = cone_feeder_sim.sim_node:main',
+            'example_controller = cone_feeder_sim.example_controller:main',
         ],
     },
 )
