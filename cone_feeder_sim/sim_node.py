@@ -349,6 +349,8 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
         ParamSpec('real_time_factor', 1.0, 'simulated seconds per wall-clock second; 0 runs '
                   'as fast as possible', dynamic=True, limits=(0.0, 100.0)),
         ParamSpec('publish_clock', False, 'publish the simulation time on /clock'),
+        ParamSpec('start_paused', False, 'start paused (resume with ~/pause false, or '
+                  '~/step): lets subscribers connect before anything happens'),
         ParamSpec('frame_id', DEFAULT_FRAME, 'frame of all published data and of spawn '
                   'poses (fixed, z up, origin at the centre of the cone base)'),
         ParamSpec('max_angular_velocity', 10.47, 'limit of the cone angular velocity; '
@@ -550,7 +552,9 @@ class SimNode(Node):
 
         self._static_markers = self._build_static_markers()
         self._tick_timer = self.create_timer(self._tick_period(), self._on_timer,
-                                             clock=self._steady)
+                                             clock=self._steady,
+                                             autostart=not values['start_paused'])
+        self._paused = bool(values['start_paused'])
         self._diag_timer = self.create_timer(float(values['diagnostics.period']),
                                              self._publish_diagnostics, clock=self._steady)
         self.add_on_set_parameters_callback(self._check_parameters)
@@ -569,7 +573,8 @@ class SimNode(Node):
         return _Output(pub, pub.topic_name, type_name, self._codec.encoder(type_name))
 
     def _values(self) -> dict[str, Any]:
-        return {name: self.get_parameter(name).value for name in self._specs}
+        # get_parameter_or: an empty list in a parameter file leaves an array NOT_SET
+        return {name: self.get_parameter_or(name).value for name in self._specs}
 
     def _tick_period(self) -> float:
         return 0.0 if self._rtf == 0.0 else self._engine.dt / self._rtf
@@ -944,8 +949,8 @@ class SimNode(Node):
         elif window.ticks and achieved < 0.9 * self._rtf:
             level = 1
             message = (f'cannot keep up: real-time factor {achieved:.2f} < {self._rtf:g} '
-                       f'(tick {1e3 * (window.step_s + window.publish_s) / ticks:.1f} ms, '
-                       f'period {1e3 * self._tick_period():.1f} ms); simulation time runs '
+                       f'(tick {1e3 * (window.step_s + window.publish_s) / ticks:.3g} ms, '
+                       f'period {1e3 * self._tick_period():.3g} ms); simulation time runs '
                        'slower, ticks are not caught up')
         else:
             message = f'real-time factor {achieved:.2f} (target {self._rtf:g})'
