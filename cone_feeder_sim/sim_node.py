@@ -528,6 +528,7 @@ class SimNode(Node):
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._last_tick_wall: float | None = None
         self._window = _Window(time.perf_counter(), self._engine.t)
+        self._timing = [0, 0.0, 0.0]  # ticks, step s, publish s since the start
 
         self._pub_particles = self._publisher(PoseArray, 'particles', STATE_QOS)
         self._pub_states = self._publisher(PointCloud2, 'particle_states', STATE_QOS)
@@ -617,6 +618,11 @@ class SimNode(Node):
         return self._paused
 
     @property
+    def timing(self) -> tuple[int, float, float]:
+        """Return ticks run, wall seconds in engine ticks and in publishing, since the start."""
+        return self._timing[0], self._timing[1], self._timing[2]
+
+    @property
     def last_tick(self) -> TickResult | None:
         """Return the result of the last tick, if any."""
         return self._last_tick
@@ -701,20 +707,7 @@ class SimNode(Node):
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response
                   ) -> SetBool.Response:
         response.success = True
-        if request.data:
-            response.message = ('already paused' if self._paused
-                                else f'paused at t = {self._engine.t:.6f} s')
-            if not self._paused:
-                self._tick_timer.cancel()
-                self._paused = True
-        else:
-            response.message = ('already running' if not self._paused
-                                else f'resumed at t = {self._engine.t:.6f} s')
-            if self._paused:
-                self._paused = False
-                self._last_tick_wall = None
-                self._window = _Window(time.perf_counter(), self._engine.t)
-                self._tick_timer.reset()
+        response.message = self.set_paused(bool(request.data))
         return response
 
     def _on_step(self, request: Trigger.Request, response: Trigger.Response
@@ -723,10 +716,30 @@ class SimNode(Node):
             response.success = False
             response.message = 'not paused: call ~/pause with data: true first'
             return response
-        result = self._run_tick()
+        result = self.step()
         response.success = True
         response.message = f'stepped to t = {result.t:.6f} s ({result.count} pieces)'
         return response
+
+    def set_paused(self, paused: bool) -> str:
+        """Pause or resume the tick timer; return what happened (as ~/pause answers)."""
+        if paused:
+            if self._paused:
+                return 'already paused'
+            self._tick_timer.cancel()
+            self._paused = True
+            return f'paused at t = {self._engine.t:.6f} s'
+        if not self._paused:
+            return 'already running'
+        self._paused = False
+        self._last_tick_wall = None
+        self._window = _Window(time.perf_counter(), self._engine.t)
+        self._tick_timer.reset()
+        return f'resumed at t = {self._engine.t:.6f} s'
+
+    def step(self) -> TickResult:
+        """Run one tick now and publish it (what ~/step does while paused)."""
+        return self._run_tick()
 
     # ------------------------------------------------------------------ parameters
 
@@ -790,6 +803,9 @@ class SimNode(Node):
         window.step_s += stepped - start
         window.step_max = max(window.step_max, stepped - start)
         window.publish_s += done - stepped
+        self._timing[0] += 1
+        self._timing[1] += stepped - start
+        self._timing[2] += done - stepped
         window.accepted += result.stats.accepted
         window.rejected += result.stats.rejected
         self._last_tick = result
