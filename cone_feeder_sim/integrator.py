@@ -118,13 +118,15 @@ def locate_exit(h, ya, yb, r_exit):
 
 @jit
 def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rtol, atol,
-                     h_min, h_kink, max_steps, stats, work, piv, k, y1, f0):
+                     h_min, h_max, h_kink, max_steps, stats, work, piv, k, y1, f0):
     """
     Advance one particle through all segments, or until it exits or fails.
 
     y (9,) is updated in place (cone axes). h_prop is the proposed first step (s); after a
     jump of the angular acceleration (a kink of omega) the step restarts from at most
-    h_kink, since the jump excites fast friction transients. Step sizes follow the
+    h_kink, since the jump excites fast friction transients. No step is longer than h_max:
+    a transition from sticking to slipping can start inside a long step without the
+    embedded error estimate noticing it. Step sizes follow the
     predictive (Gustafsson) controller of Hairer and Wanner's RODAS.
     Returns (status, t_end_or_exit, h_prop): status ACTIVE when the interval was completed,
     EXITED with the exit time (y then holds the state at the exit), or FAILED with the time
@@ -200,16 +202,16 @@ def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rt
             err_acc = max(err, 1e-4)
             if truncated:
                 t = t_end
-                h_prop = max(h_prop, h * grow)
+                h_prop = min(h_max, max(h_prop, h * grow))
             else:
                 t += h
-                h_prop = h * grow
+                h_prop = min(h_max, h * grow)
     return ACTIVE, t, h_prop
 
 
 @jit
 def advance_batch(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, status, t_event,
-                  rtol, atol, h_min, h_kink, max_steps, stats):
+                  rtol, atol, h_min, h_max, h_kink, max_steps, stats):
     """
     Advance every ACTIVE particle over the interval seg_t[0]..seg_t[-1].
 
@@ -227,7 +229,8 @@ def advance_batch(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, statu
         if status[p] != ACTIVE:
             continue
         st, t_ev, hp = advance_particle(y[p], pp[p], gp, seg_t, seg_omega, seg_domega,
-                                        r_exit, h_prop[p], rtol, atol, h_min, h_kink, max_steps,
+                                        r_exit, h_prop[p], rtol, atol, h_min, h_max, h_kink,
+                                        max_steps,
                                         stats[p], work, piv, k, y1, f0)
         status[p] = st
         t_event[p] = t_ev

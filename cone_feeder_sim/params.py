@@ -348,8 +348,9 @@ class SolverParams:
     rtol: relative tolerance; atol_position (m), atol_velocity (m/s), atol_force (N):
     absolute tolerances of the three blocks of the state; h_init (s) first trial step, and
     the largest step tried right after a jump of the cone's angular acceleration;
-    h_min (s) smallest step before a particle is declared failed; max_steps: accepted plus
-    rejected steps allowed per particle and call.
+    h_min (s) smallest step before a particle is declared failed; h_max (s) longest step
+    (a stick-slip transition starting inside a longer step can escape the error estimate);
+    max_steps: accepted plus rejected steps allowed per particle and call.
     """
 
     rtol: float = 1.0e-5
@@ -358,6 +359,7 @@ class SolverParams:
     atol_force: float = 1.0e-4
     h_init: float = 1.0e-5
     h_min: float = 1.0e-12
+    h_max: float = 0.01
     max_steps: int = 1_000_000
 
     def __post_init__(self) -> None:
@@ -368,6 +370,7 @@ class SolverParams:
                   'atol_force': Limit(0.0, 1.0e3, 'N', lo_open=True),
                   'h_init': Limit(0.0, 1.0, 's', lo_open=True),
                   'h_min': Limit(0.0, 1.0e-3, 's', lo_open=True),
+                  'h_max': Limit(0.0, 10.0, 's', lo_open=True),
                   'max_steps': Limit(1, 1e12, '')}
         for key, limit in limits.items():
             value = check_number(key, getattr(self, key), limit)

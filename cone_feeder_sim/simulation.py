@@ -260,7 +260,8 @@ def advance(state: SimState, setup: Setup, profile: RotationProfile,
     if n:
         advance_batch(y, state.products, setup.global_row, seg_t, seg_omega, seg_domega,
                       setup.model.r, h, status, t_event, solver.rtol, setup.atol,
-                      solver.h_min, solver.h_init, solver.max_steps, stats)
+                      solver.h_min, solver.h_max, solver.h_init, solver.max_steps,
+                      stats)
     exits = _exit_events(state, setup, profile, y, status, t_event)
     failures = tuple(
         Failure(particle_id=int(state.ids[i]), t=float(t_event[i]),

@@ -66,7 +66,7 @@ def _batch(y: np.ndarray, seg_t: list[float], omega: float, max_steps: int = 1_0
     seg = np.array(seg_t)
     integrator.advance_batch(y, pp, GP, seg, np.full(seg.size - 1, omega),
                              np.zeros(seg.size - 1), 0.225, h, status, t_event, 1e-5, ATOL,
-                             h_min, 1e-5, max_steps, stats)
+                             h_min, 0.01, 1e-5, max_steps, stats)
     return status, t_event, stats
 
 
