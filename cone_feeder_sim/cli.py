@@ -68,6 +68,14 @@ class ProgressBar:
         self.stream.flush()
 
 
+def check_writable(path: str) -> None:
+    """Refuse an output path whose directory does not exist or cannot be written, up front."""
+    parent = Path(path).resolve().parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise ConeFeederError(f'cannot write events to {path}: directory {parent} does not '
+                              'exist or is not writable')
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of the command line."""
     parser = argparse.ArgumentParser(
@@ -86,6 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
 def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
     """Run a scenario; return the exit code."""
     scenario: Scenario = load_scenario(args.scenario)
+    check_writable(args.events)
     progress = None if args.quiet else ProgressBar(scenario.duration, err)
     result = run_scenario(scenario, progress)
     rows = write_events_csv(args.events, result.exit_table())

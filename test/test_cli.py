@@ -1,0 +1,105 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Tests of the command line and of the runner and the events CSV it writes."""
+
+import csv
+import io
+from pathlib import Path
+
+from cone_feeder_sim.cli import main, ProgressBar
+from cone_feeder_sim.events_io import EVENT_COLUMNS
+from cone_feeder_sim.runner import run_scenario
+from cone_feeder_sim.scenario import scenario_from_mapping
+import numpy as np
+import pytest
+
+SCENARIO = """\
+duration: 3.0
+rotation: [[0.0, 0.0], [0.4, -10.47]]
+particles:
+  - {position: [0.11, -0.01, 0.03], d: 225.0}
+  - {position: [0.14, 0.06, 0.03], d: 30.0}
+  - {position: [0.02, 0.0, 0.0], on_surface: true}
+"""
+
+
+def test_run_writes_one_row_per_exit(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text(SCENARIO)
+    events = tmp_path / 'events.csv'
+    assert main(['run', str(scenario), '--events', str(events)]) == 0
+    with events.open() as stream:
+        rows = list(csv.DictReader(stream))
+    assert tuple(rows[0].keys()) == EVENT_COLUMNS
+    assert sorted(int(r['particle']) for r in rows) == [0, 1]  # the piece near the tip stays
+    for row in rows:
+        angle = float(row['angle_deg'])
+        assert 0.0 <= angle < 360.0
+        assert np.hypot(float(row['x']), float(row['y'])) == pytest.approx(0.225, abs=1e-6)
+        assert np.degrees(np.arctan2(float(row['y']), float(row['x']))) % 360 == (
+            pytest.approx(angle))
+        assert 1 <= int(row['channel']) <= 14
+    times = [float(r['t']) for r in rows]
+    assert times == sorted(times)
+    err = capsys.readouterr().err
+    assert '2 of 3 pieces left the cone; 1 still on it' in err
+    assert '100.0%' in err  # the progress bar reached the end
+
+
+def test_bad_scenario_fails_before_running(tmp_path: Path,
+                                          capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text(SCENARIO.replace('d: 30.0', 'd: -30.0'))
+    events = tmp_path / 'events.csv'
+    assert main(['run', str(scenario), '--events', str(events), '--quiet']) == 2
+    assert "parameter 'd' = -30 is out of range" in capsys.readouterr().err
+    assert not events.exists()
+
+
+def test_unwritable_events_file(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text(SCENARIO)
+    code = main(['run', str(scenario), '--events', str(tmp_path / 'no' / 'e.csv')])
+    err = capsys.readouterr().err
+    assert code == 2 and 'cannot write events' in err
+    assert '%' not in err  # refused before the run started
+
+
+def test_runner_matches_the_simulator_and_stops_when_empty() -> None:
+    sc = scenario_from_mapping({'duration': 10.0, 'rotation': [[0.0, 0.0], [0.4, -10.47]],
+                                'particles': [{'position': [0.11, -0.01, 0.03]}]})
+    seen = []
+    result = run_scenario(sc, lambda t, sim, step: seen.append(t))
+    table = result.exit_table()
+    assert table['ids'].tolist() == [0]
+    assert seen[-1] < 10.0  # stopped once the only piece had left
+    assert result.accepted_steps > 0 and result.remaining_ids.size == 0
+
+
+def test_progress_bar_on_a_pipe_prints_every_tenth() -> None:
+    stream = io.StringIO()
+    bar = ProgressBar(1.0, stream)
+
+    class Step:
+        exits = ()
+
+    class Sim:
+        class state:  # noqa: N801 - mimics Simulator.state
+            count = 3
+
+    for k in range(1, 101):
+        bar(k / 100.0, Sim(), Step())  # type: ignore[arg-type]
+    lines = stream.getvalue().splitlines()
+    assert len(lines) == 11 and lines[-1].startswith('[' + '#' * 30 + ']')
