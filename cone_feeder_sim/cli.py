@@ -20,6 +20,8 @@ Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors.
 
 import argparse
 from collections.abc import Sequence
+import os
+from pathlib import Path
 import sys
 import time
 from typing import TextIO

@@ -58,8 +58,8 @@ def test_run_writes_one_row_per_exit(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert '100.0%' in err  # the progress bar reached the end
 
 
-def test_bad_scenario_fails_before_running(tmp_path: Path,
-                                          capsys: pytest.CaptureFixture) -> None:
+def test_bad_scenario_fails_before_running(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     scenario = tmp_path / 'scenario.yaml'
     scenario.write_text(SCENARIO.replace('d: 30.0', 'd: -30.0'))
     events = tmp_path / 'events.csv'
