@@ -27,6 +27,7 @@ controller runs beside it. The first start compiles the numba kernels of the new
 from collections.abc import Iterator
 import os
 from pathlib import Path
+import random
 import shutil
 import subprocess
 import sys
@@ -106,10 +107,12 @@ def test_ros2_run_lookup_finds_and_runs_the_installed_node(
     assert where.startswith(str(prefix))
 
     domain = random_domain()
-    node = SimProcess([str(sim_node), '--ros-args', '--params-file', str(config)], domain,
-                      tmp_path / 'sim_node.log', env=env, cwd=tmp_path)
+    namespace = f'/colcon{random.randrange(1_000_000)}'
+    node = SimProcess([str(sim_node), '--ros-args', '--params-file', str(config), '-r',
+                       f'__ns:={namespace}'], domain, tmp_path / 'sim_node.log', env=env,
+                      cwd=tmp_path)
     ctl = None
-    client = Client(domain)
+    client = Client(domain, namespace=namespace)
     try:
         states: list[JointState] = []
         commands: list[Float64] = []
@@ -120,8 +123,9 @@ def test_ros2_run_lookup_finds_and_runs_the_installed_node(
         assert states, node.log()
         assert states[0].name == ['cone']
         # the example controller takes over from the open-loop pattern
-        ctl = SimProcess([str(controller), '--ros-args', '-p', f'speed:={SPEED}'], domain,
-                         tmp_path / 'controller.log', env=env, cwd=tmp_path)
+        ctl = SimProcess([str(controller), '--ros-args', '-p', f'speed:={SPEED}', '-r',
+                          f'__ns:={namespace}'], domain, tmp_path / 'controller.log',
+                         env=env, cwd=tmp_path)
         assert client.spin_until(lambda: len(commands) >= 3 or not ctl.alive(), 60.0), \
             ctl.log()
         assert commands, ctl.log()
