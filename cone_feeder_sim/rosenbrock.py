@@ -152,8 +152,9 @@ def factor_mechanical(jac, alpha, lu_m, lu_s, tmat, piv_m, piv_s):
     the state blocks (x, w, P). Eliminating x and P leaves two 3x3 systems:
     M = alpha I - F and the Schur complement S = alpha I - B - A/alpha - C M^-1 (D/alpha + E).
     lu_m, lu_s (3, 3) receive LU(M) and LU(S) (see :func:`factor3`), tmat (3, 3) is
-    scratch, piv_m, piv_s (3,) receive the pivots. Much cheaper than a dense 9x9 factorisation; test_rosenbrock compares it with
-    a dense solve. Returns False if a pivot vanishes or is not finite.
+    scratch, piv_m, piv_s (3,) receive the pivots. Much cheaper than a dense 9x9
+    factorisation; test_rosenbrock compares it with a dense solve. Returns False if a pivot
+    vanishes or is not finite.
     """
     inv_a = 1.0 / alpha
     for i in range(3):
