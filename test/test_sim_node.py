@@ -121,7 +121,7 @@ def flatten(tree: dict, prefix: str = '') -> dict[str, Any]:
 def test_defaults_are_the_default_config_file(ros: Ros) -> None:
     sim = ros.sim()
     content = yaml.safe_load(CONFIG.read_text())
-    params = flatten(content['/**']['ros__parameters'])
+    params = flatten(content['/**/sim_node']['ros__parameters'])
     assert len(params) > 20
     for name, value in params.items():
         actual = sim.get_parameter(name).value
