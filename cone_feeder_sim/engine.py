@@ -48,7 +48,7 @@ back (stamps stay monotonic) and particle ids keep counting (ids are unique over
 it removes every piece, zeroes the channel masses, stops the cone (omega = 0, angle = 0,
 the one place where the acceleration limit is not applied), restarts the open-loop
 pattern, forgets the rotation commands, re-seeds the feed generator and places the initial
-pieces again.
+pieces again. The drive and feed parameters in force (after reconfigurations) are kept.
 
 No wall clock is read here: timing belongs to the caller (the ROS node).
 """
