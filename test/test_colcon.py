@@ -25,6 +25,7 @@ controller runs beside it. The first start compiles the numba kernels of the new
 """
 
 from collections.abc import Iterator
+import importlib.util
 import os
 from pathlib import Path
 import random
@@ -51,15 +52,15 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope='module')
 def workspace(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
-    colcon = shutil.which('colcon')
-    if colcon is None:
-        pytest.skip('colcon is not installed')
+    # colcon of this interpreter, so that the build and the installed scripts use it too
+    if importlib.util.find_spec('colcon_core') is None:
+        pytest.skip('colcon is not installed for this Python')
     base = tmp_path_factory.mktemp('ws')
     before = {p.name for p in ROOT.iterdir()}
     src = base / 'src' / PACKAGE
     shutil.copytree(ROOT, src, ignore=IGNORE)
     proc = subprocess.run(
-        [colcon, '--log-base', str(base / 'log'), 'build', '--base-paths', str(base / 'src'),
+        [sys.executable, '-m', 'colcon', '--log-base', str(base / 'log'), 'build', '--base-paths', str(base / 'src'),
          '--build-base', str(base / 'build'), '--install-base', str(base / 'install')],
         cwd=base, capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
