@@ -123,6 +123,16 @@ def measure(context: Context, count: int, args: argparse.Namespace) -> dict[str,
     executor.add_node(node)
     try:
         engine = node.engine
+        steps = [0, 0]
+        tick = engine.tick
+
+        def counted_tick() -> Any:
+            result = tick()
+            steps[0] += result.stats.accepted
+            steps[1] += result.stats.rejected
+            return result
+
+        engine.tick = counted_tick  # count the integrator's steps of the measured ticks
 
         def run(ticks: int) -> None:
             target = engine.tick_index + ticks
@@ -139,6 +149,7 @@ def measure(context: Context, count: int, args: argparse.Namespace) -> dict[str,
         run(args.warmup)
         start_ticks = engine.tick_index
         _, step0, publish0 = node.timing
+        steps[0] = steps[1] = 0
         wall0 = time.perf_counter()
         cpu0 = time.process_time()
         run(args.ticks)
@@ -152,6 +163,8 @@ def measure(context: Context, count: int, args: argparse.Namespace) -> dict[str,
             'step_ms': 1e3 * (step1 - step0) / ticks,
             'publish_ms': 1e3 * (publish1 - publish0) / ticks,
             'pieces_end': engine.piece_count,
+            'steps': (steps[0] + steps[1]) / ticks / max(count, 1),
+            'rejected': steps[1] / max(steps[0] + steps[1], 1),
         }
     finally:
         executor.shutdown()
@@ -162,7 +175,7 @@ def report(row: dict[str, Any]) -> None:
     """Print one measurement."""
     print(f"{row['count']:7d} {row['ticks']:6d} {row['tick_ms']:9.2f} {row['cpu_ms']:8.2f} "
           f"{row['step_ms']:9.2f} {row['publish_ms']:10.2f} {row['rtf']:7.2f} "
-          f"{row['pieces_end']:8d}", flush=True)
+          f"{row['pieces_end']:8d} {row['steps']:10.2f} {row['rejected']:9.1%}", flush=True)
 
 
 def main() -> int:
@@ -208,7 +221,10 @@ def main() -> int:
           f'{args.rate:g} Hz, {args.ticks} ticks after {args.warmup}, core {args.cpu}, '
           f'subscriber {"yes" if args.subscriber else "no"}, load average '
           f'{" ".join(f"{v:.2f}" for v in os.getloadavg())}')
-    print('# pieces  ticks  wall/tick  cpu/tick  step(ms)  publish(ms)     RTF  pieces@end')
+    print('# pieces  ticks  wall/tick  cpu/tick  step(ms)  publish(ms)     RTF  pieces@end '
+          'steps/piece rejected')
+    print('#                     (ms)      (ms)   (engine)    (encode+publish)            '
+          '  per tick')
     try:
         measure(context, 5, argparse.Namespace(**{**vars(args), 'ticks': 5, 'warmup': 1}))
         if args.counts:

@@ -86,7 +86,7 @@ parameter files (``2.0``, not ``2``); an empty array (``[]``) means "none".
 """
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 import math
 from pathlib import Path
 import sys
@@ -310,6 +310,7 @@ _SOLVER_SPECS = (
     ('atol_force', 'integrator absolute tolerance of the filter force (N)', (0.0, 1.0e3)),
     ('h_init', 'first trial step of the integrator (s)', (0.0, 1.0)),
     ('h_min', 'smallest step before a piece is declared failed (s)', (0.0, 1.0e-3)),
+    ('h_max', 'longest integrator step (s)', (0.0, 10.0)),
     ('max_steps', 'steps allowed per piece and tick', (1, 1_000_000_000)),
 )
 
@@ -393,6 +394,11 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
     ]
     specs += [ParamSpec(f'solver.{key}', getattr(solver, key), text, limits=limits)
               for key, text, limits in _SOLVER_SPECS]
+    # settings added to SolverParams later are declared too (without a range of their own)
+    known = {key for key, _, _ in _SOLVER_SPECS}
+    specs += [ParamSpec(f'solver.{f.name}', getattr(solver, f.name),
+                        f'integrator setting {f.name}, see cone_feeder_sim.params.SolverParams')
+              for f in fields(SolverParams) if f.name not in known]
     specs += model_param_specs(base if base is not None else ModelParams())
     return specs
 

@@ -15,6 +15,7 @@
 """In-process tests of sim_node: an isolated rclpy Context and executor per test."""
 
 from collections.abc import Callable, Iterator
+from dataclasses import fields
 import math
 from pathlib import Path
 import random
@@ -23,6 +24,7 @@ from typing import Any
 
 from cone_feeder_sim.cdr import decode
 from cone_feeder_sim.errors import ParameterError, ScenarioError
+from cone_feeder_sim.params import SolverParams
 from cone_feeder_sim.sim_node import (
     EXIT_DTYPE, MessageRecord, parameter_specs, SimNode, STATE_DTYPE)
 from geometry_msgs.msg import Pose, PoseArray
@@ -129,6 +131,9 @@ def test_defaults_are_the_default_config_file(ros: Ros) -> None:
             assert list(actual) == value, name
         else:
             assert actual == value, name
+    # every setting of the integrator is a parameter, with its default in the file
+    solver = {n for n in params if n.startswith('solver.')}
+    assert solver == {f'solver.{f.name}' for f in fields(SolverParams)}
     assert sim.engine.piece_count == 5
     np.testing.assert_allclose(sim.engine.state.products[:, 1], [225, 135, 750, 750, 30])
 
