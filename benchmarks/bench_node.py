@@ -83,6 +83,7 @@ try:
     rclpy.spin(node)
 except BaseException:
     pass
+print('received', count[0], flush=True)
 """
 
 
@@ -256,7 +257,8 @@ def main() -> int:
         context.try_shutdown()
         if subscriber is not None:
             subscriber.terminate()
-            subscriber.wait(10)
+            out, _ = subscriber.communicate(timeout=20)
+            print(f'# subscriber: {out.strip()} messages (particles, particle_states, markers)')
     return 0
 
 
