@@ -192,6 +192,12 @@ def test_runtime_parameters_take_effect(ros: Ros) -> None:
     assert sim.engine.drive.max_angular_velocity == 3.0
     assert sim.engine.drive.pattern == ((1.0, 2.0),)
     assert sim.last_tick.target_omega == 2.0
+    # 0: as fast as possible
+    assert sim.set_parameters([Parameter('real_time_factor', value=0.0)])[0].successful
+    assert sim._tick_timer.timer_period_ns == 0
+    sim.set_paused(False)
+    index = sim.engine.tick_index
+    assert ros.spin_until(lambda: sim.engine.tick_index >= index + 20)
 
 
 @pytest.mark.parametrize('params, error, fragment', [
