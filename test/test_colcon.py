@@ -60,8 +60,9 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, An
     src = base / 'src' / PACKAGE
     shutil.copytree(ROOT, src, ignore=IGNORE)
     proc = subprocess.run(
-        [sys.executable, '-m', 'colcon', '--log-base', str(base / 'log'), 'build', '--base-paths', str(base / 'src'),
-         '--build-base', str(base / 'build'), '--install-base', str(base / 'install')],
+        [sys.executable, '-m', 'colcon', '--log-base', str(base / 'log'), 'build',
+         '--base-paths', str(base / 'src'), '--build-base', str(base / 'build'),
+         '--install-base', str(base / 'install')],
         cwd=base, capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     new_in_repo = {p.name for p in ROOT.iterdir()} - before
