@@ -1001,7 +1001,8 @@ class SimNode(Node):
         stamp = _stamp(self._engine.t)
         message_dict = {
             'header': {'stamp': stamp, 'frame_id': ''},
-            'status': [{'level': level, 'name': f'{self.get_name()}: simulation',
+            'status': [{'level': level,
+                        'name': f'{self.get_fully_qualified_name()}: simulation',
                         'message': message, 'hardware_id': 'cone_feeder',
                         'values': [{'key': k, 'value': v} for k, v in values.items()]}]}
         self._publish(self._pub_diag, message_dict, stamp['sec'] * 1_000_000_000
