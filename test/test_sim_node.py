@@ -437,6 +437,20 @@ def test_diagnostics_warn_when_the_cpu_cannot_keep_up(ros: Ros) -> None:
                if kv['key'] == 'skipped periods')
 
 
+def test_a_stall_is_not_caught_up(ros: Ros) -> None:
+    sim = ros.sim(**{'feed.rate': 0.0, 'markers.rate': 0.0, 'diagnostics.period': 3600.0})
+    assert ros.spin_until(lambda: sim.engine.tick_index >= 5)
+    skipped = sim._window.skipped
+    time.sleep(0.5)  # the stall under test: 25 periods of 20 ms pass without the executor
+    index = sim.engine.tick_index
+    start = time.monotonic()
+    ros.spin_until(lambda: False, 0.2)
+    elapsed = time.monotonic() - start
+    # at most one tick per period from now on (a catch-up would run ~25 ticks at once)
+    assert sim.engine.tick_index - index <= elapsed / 0.02 + 2
+    assert sim._window.skipped - skipped >= 20
+
+
 def test_topics_are_relative_and_described_for_recording(ros: Ros) -> None:
     sim = ros.sim(namespace='/line2')
     topics = {t.topic: t for t in sim.topics()}
