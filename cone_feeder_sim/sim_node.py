@@ -510,6 +510,13 @@ class SimNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         """Declare the parameters, build the engine and create every ROS handle."""
         super().__init__(kwargs.pop('node_name', NODE_NAME), **kwargs)
+        try:
+            self._setup()
+        except BaseException:
+            self.destroy_node()
+            raise
+
+    def _setup(self) -> None:
         self._codec = default_codec()
         self._hooks: list[MessageHook] = []
         self._topics: dict[str, TopicInfo] = {}
