@@ -65,8 +65,8 @@ from .params import (
     check_number, Limit, ModelParams, P_M, PRODUCT_LIMITS, ProductParams, SolverParams)
 from .rotation import RotationProfile
 from .simulation import (
-    add_particles, advance, check_positions, ExitEvents, Failure, Setup, SimState, StepStats,
-    world_from_cone)
+    add_particles, advance, as_points, check_positions, ExitEvents, Failure, Setup, SimState,
+    StepStats, world_from_cone)
 
 __all__ = [
     'DriveParams',
@@ -265,9 +265,9 @@ class EngineConfig:
         object.__setattr__(self, 'initial_pieces', tuple(self.initial_pieces))
         for i, piece in enumerate(self.initial_pieces):
             try:
-                check_positions(self.model, _points('position', piece.position, 1))
+                check_positions(self.model, as_points('position', piece.position, 1))
                 if piece.velocity is not None:
-                    _points('velocity', piece.velocity, 1)
+                    as_points('velocity', piece.velocity, 1)
             except ScenarioError as exc:
                 raise ScenarioError(f'initial piece {i}: {exc}') from exc
 
@@ -278,24 +278,6 @@ def check_feed_fits(model: ModelParams, feed: FeedParams) -> None:
         raise ParameterError(
             f'feed.rho_max = {feed.rho_max:g} m must be inside the cone (radius r = '
             f'{model.r:g} m)')
-
-
-def _points(name: str, values: Any, count: int | None) -> np.ndarray:
-    """Return values as a finite (M, 3) float64 array or raise ScenarioError."""
-    try:
-        arr = np.array(values, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ScenarioError(f'{name} must be numbers of shape (M, 3): {exc}') from exc
-    if arr.ndim == 1 and arr.shape[0] == 3:
-        arr = arr.reshape(1, 3)
-    if arr.ndim != 2 or arr.shape[1] != 3 or (count is not None and arr.shape[0] != count):
-        want = f'({count}, 3)' if count is not None else '(M, 3)'
-        raise ScenarioError(f'{name} must have shape {want}, got {arr.shape}')
-    bad = ~np.all(np.isfinite(arr), axis=1)
-    if np.any(bad):
-        i = int(np.argmax(bad))
-        raise ScenarioError(f'{name}[{i}] is not finite: {arr[i].tolist()}')
-    return arr
 
 
 @dataclass(frozen=True)
@@ -533,7 +515,7 @@ class FeederEngine:
         self._pending.append(item)
 
     def _checked_spawn(self, item: SpawnRequest) -> SpawnRequest:
-        positions = _points('spawn position', item.positions, None)
+        positions = as_points('spawn position', item.positions, None)
         count = positions.shape[0]
         if count == 0:
             raise ScenarioError('a spawn request needs at least one position')
@@ -542,7 +524,7 @@ class FeederEngine:
                                 f'{count}')
         check_positions(self._config.model, positions)
         velocities = (None if item.velocities is None
-                      else _points('spawn velocity', item.velocities, count))
+                      else as_points('spawn velocity', item.velocities, count))
         products = None
         if item.products is not None:
             products = tuple(item.products)

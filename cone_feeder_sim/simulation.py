@@ -165,8 +165,16 @@ def cone_from_world(q: np.ndarray, qdot: np.ndarray, q_d: np.ndarray, angle: flo
     return np.hstack([x, v, rotate_z(q_d, -angle)])
 
 
-def _as_points(name: str, values: object, count: int | None) -> np.ndarray:
-    arr = np.asarray(values, dtype=np.float64)
+def as_points(name: str, values: object, count: int | None = None) -> np.ndarray:
+    """
+    Return values as a finite (M, 3) float64 array, or raise ScenarioError naming them.
+
+    A single point of shape (3,) is accepted as (1, 3); count, if given, is the required M.
+    """
+    try:
+        arr = np.array(values, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f'{name} must be numbers of shape (M, 3): {exc}') from exc
     if arr.ndim == 1 and arr.shape[0] == 3:
         arr = arr.reshape(1, 3)
     if arr.ndim != 2 or arr.shape[1] != 3 or (count is not None and arr.shape[0] != count):
@@ -174,8 +182,8 @@ def _as_points(name: str, values: object, count: int | None) -> np.ndarray:
         raise ScenarioError(f'{name} must have shape {want}, got {arr.shape}')
     bad = ~np.all(np.isfinite(arr), axis=1)
     if np.any(bad):
-        raise ScenarioError(f'{name}[{int(np.argmax(bad))}] is not finite: '
-                            f'{arr[int(np.argmax(bad))].tolist()}')
+        i = int(np.argmax(bad))
+        raise ScenarioError(f'{name}[{i}] is not finite: {arr[i].tolist()}')
     return arr
 
 
@@ -206,7 +214,7 @@ def add_particles(state: SimState, setup: Setup, positions: object,
     ProductParams per piece or None for the setup's default product; omega (rad/s) the cone's
     angular velocity at state.t. The filter force starts at zero.
     """
-    q = _as_points('position', positions, None)
+    q = as_points('position', positions)
     count = q.shape[0]
     check_positions(setup.model, q)
     if velocities is None:
@@ -214,7 +222,7 @@ def add_particles(state: SimState, setup: Setup, positions: object,
         qdot[:, 0] = -omega * q[:, 1]
         qdot[:, 1] = omega * q[:, 0]
     else:
-        qdot = _as_points('velocity', velocities, count)
+        qdot = as_points('velocity', velocities, count)
     if products is None:
         rows = np.tile(product_row(setup.model.product), (count, 1))
     else:
