@@ -31,7 +31,8 @@ setup(
     ],
     # The ROS 2 Python packages (rclpy, message packages) come from the ROS installation
     # (apt) or from the PyPI ros-jazzy-* wheels; they are deliberately not listed here.
-    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'numba', 'mcap'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'numba', 'mcap',
+                      'matplotlib'],
     zip_safe=True,
     maintainer='cone_feeder_sim maintainers',
     maintainer_email='maintainers@cone-feeder-sim.invalid',

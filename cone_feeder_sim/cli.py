@@ -13,7 +13,10 @@
 # limitations under the License.
 
 """
-The command line: `cone-feeder-sim run SCENARIO.yaml --events EVENTS.csv`.
+The command line: `cone-feeder-sim run` (headless runs) and `cone-feeder-sim report`.
+
+`cone-feeder-sim run SCENARIO.yaml --events EVENTS.csv` runs a scenario;
+`cone-feeder-sim report RUN.mcap --out REPORT.png` draws the report of a recorded run.
 
 Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors.
 """
@@ -70,11 +73,11 @@ class ProgressBar:
         self.stream.flush()
 
 
-def check_writable(path: str) -> None:
+def check_writable(path: str, what: str = 'events') -> None:
     """Refuse an output path whose directory does not exist or cannot be written, up front."""
     parent = Path(path).resolve().parent
     if not parent.is_dir() or not os.access(parent, os.W_OK):
-        raise ConeFeederError(f'cannot write events to {path}: directory {parent} does not '
+        raise ConeFeederError(f'cannot write {what} to {path}: directory {parent} does not '
                               'exist or is not writable')
 
 
@@ -90,6 +93,16 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument('scenario', help='scenario YAML file')
     run.add_argument('--events', required=True, help='CSV file for the exit events')
     run.add_argument('--quiet', action='store_true', help='no progress bar')
+    report = sub.add_parser(
+        'report', help='draw a one-page PNG report of a recorded run (MCAP file)')
+    report.add_argument('mcap', help='MCAP file of a run (sim_node or the headless runner)')
+    report.add_argument('--out', help='PNG file to write (default: the MCAP path with .png)')
+    report.add_argument('--namespace', default=None,
+                        help='use the topics of this namespace (default: the first found)')
+    report.add_argument('--max-trajectories', type=int, default=None, metavar='N',
+                        help='draw at most N trajectories (default 60)')
+    report.add_argument('--dpi', type=float, default=100.0,
+                        help='resolution; the page is 17 x 9.6 inches (default 100)')
     return parser
 
 
@@ -109,6 +122,30 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
     return 0
 
 
+def cmd_report(args: argparse.Namespace, err: TextIO) -> int:
+    """Write the PNG report of a recorded run; return the exit code."""
+    from .report import DEFAULT_MAX_TRAJECTORIES, write_report  # matplotlib only when needed
+
+    out = args.out if args.out else str(Path(args.mcap).with_suffix('.png'))
+    if args.max_trajectories is not None and args.max_trajectories < 1:
+        raise ConeFeederError('--max-trajectories must be at least 1')
+    if not args.dpi > 0:
+        raise ConeFeederError('--dpi must be positive')
+    if Path(out).resolve() == Path(args.mcap).resolve():
+        raise ConeFeederError(f'the report would overwrite the recording {args.mcap}')
+    check_writable(out, 'the report')
+    run = write_report(
+        args.mcap, out, dpi=args.dpi, namespace=args.namespace,
+        max_trajectories=args.max_trajectories or DEFAULT_MAX_TRAJECTORIES)
+    for note in run.notes:
+        err.write(f'note: {note}\n')
+    totals = run.exit_totals()
+    err.write(f'report written to {out}: {run.message_count} messages, '
+              f'{run.trajectories.pieces_seen} pieces seen, {len(run.exits)} exits '
+              f'({float(totals.mass.sum()):.3f} kg)\n')
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `cone-feeder-sim`."""
     parser = build_parser()
@@ -116,6 +153,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == 'run':
             return cmd_run(args, sys.stderr)
+        if args.command == 'report':
+            return cmd_report(args, sys.stderr)
     except ConeFeederError as exc:
         sys.stderr.write(f'error: {exc}\n')
         return 2

@@ -1,0 +1,975 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+One-page PNG report of a recorded run (``cone-feeder-sim report run.mcap``).
+
+Reading and drawing are separate steps. :func:`read_run` streams an MCAP file
+(ROS 2 profile, CDR messages) with mcap's non-seeking reader, so a file cut
+off by a crash still yields everything before the damage, and turns the
+topics ``particle_states``, ``exit_events``, ``cone_state`` and
+``channel_mass`` (matched by the last part of the topic name and by type)
+into numpy arrays in a :class:`RunData`. PointCloud2 ``data`` is read with
+``np.frombuffer`` and a structured dtype built from the message's ``fields``.
+Times are log times (simulation time) in seconds.
+
+Trajectories are thinned so that big runs stay fast: at most
+``max_trajectories`` pieces are kept (ids divisible by a power of two, so the
+choice is spread over the run) and at most ``max_trajectory_points`` points
+(every ``2**k``-th ``particle_states`` message). Piece counts, ω(t), exits and
+channel masses are always complete.
+
+The channel layout and the cone radius come from the metadata record
+``cone_feeder_sim`` (string values of ``model.cone_diameter``,
+``model.channel_count``, ``model.channel_boundary``,
+``model.channel_numbering``); missing or invalid values fall back to
+:class:`~cone_feeder_sim.params.ModelParams` defaults, with a note on the
+figure. :func:`build_figure` draws the page with matplotlib (Agg canvas, no
+display) and :func:`write_report` does both and saves the PNG.
+"""
+
+import collections.abc
+import dataclasses
+import functools
+import math
+import os
+import pathlib
+import struct
+from typing import Any
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle, Wedge
+from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.records import Channel, Header, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+import numpy as np
+import yaml
+
+from .cdr import CdrCodec, CdrError, default_codec
+from .errors import ConeFeederError, ParameterError
+from .msgdefs import (
+    MessageDefinitionError,
+    MessageDefinitionRegistry,
+    normalize_type_name,
+    SEPARATOR,
+)
+from .params import ChannelLayout, model_params_from_mapping, ModelParams
+
+try:  # zstandard is optional for mcap; only needed to recognise its errors here.
+    import zstandard
+except ImportError:  # pragma: no cover - installed with mcap's zstd support
+    zstandard = None
+
+__all__ = [
+    'DEFAULT_MAX_TRAJECTORIES',
+    'DEFAULT_MAX_TRAJECTORY_POINTS',
+    'METADATA_NAME',
+    'ChannelTotals',
+    'ExitEvents',
+    'ReportError',
+    'RunData',
+    'TimeSeries',
+    'Trajectories',
+    'build_figure',
+    'check_channel_mass',
+    'cloud_points',
+    'exits_per_channel',
+    'layout_from_metadata',
+    'point_dtype',
+    'read_run',
+    'write_report',
+]
+
+#: Name of the metadata record that holds the run's parameters.
+METADATA_NAME = 'cone_feeder_sim'
+#: Metadata keys of the channel layout and cone size, by parameter-file key.
+METADATA_KEYS = {
+    'cone_diameter': 'model.cone_diameter',
+    'channel_count': 'model.channel_count',
+    'channel_boundary': 'model.channel_boundary',
+    'channel_numbering': 'model.channel_numbering',
+}
+DEFAULT_MAX_TRAJECTORIES = 60
+DEFAULT_MAX_TRAJECTORY_POINTS = 400_000
+
+#: Topic roles: last part of the topic name -> message type.
+TOPIC_TYPES = {
+    'particle_states': 'sensor_msgs/msg/PointCloud2',
+    'exit_events': 'sensor_msgs/msg/PointCloud2',
+    'cone_state': 'sensor_msgs/msg/JointState',
+    'channel_mass': 'std_msgs/msg/Float64MultiArray',
+}
+
+#: sensor_msgs/PointField datatypes -> numpy type codes (without byte order).
+POINT_FIELD_TYPES = {1: 'i1', 2: 'u1', 3: 'i2', 4: 'u2', 5: 'i4', 6: 'u4', 7: 'f4', 8: 'f8'}
+
+#: What reading a truncated or corrupt record can raise (EndOfFile is an McapError).
+_READ_ERRORS: tuple[type[BaseException], ...] = (
+    McapError, EOFError, ValueError, RuntimeError, struct.error, KeyError, IndexError) + (
+    (zstandard.ZstdError,) if zstandard is not None else ())
+
+
+class ReportError(ConeFeederError):
+    """A recording cannot be read or a report cannot be written."""
+
+
+# --------------------------------------------------------------------------- data
+
+
+@dataclasses.dataclass(frozen=True)
+class TimeSeries:
+    """Values over simulation time: ``t`` (s) and ``value``, both shape (n,), sorted by t."""
+
+    t: np.ndarray
+    value: np.ndarray
+
+    def __len__(self) -> int:
+        """Return the number of samples."""
+        return int(self.t.shape[0])
+
+
+@dataclasses.dataclass(frozen=True)
+class Trajectories:
+    """
+    Positions of the kept pieces from the kept ``particle_states`` messages.
+
+    One row per point: ``t`` (s, log time), ``ids`` (int64), ``x``, ``y`` (m), in
+    reading order. Kept were the messages whose index (0-based, over all
+    ``particle_states`` messages) is divisible by ``message_stride`` and the
+    pieces whose id is divisible by ``id_stride``; ``pieces_seen`` counts the
+    distinct ids of all messages.
+    """
+
+    t: np.ndarray
+    ids: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    message_stride: int = 1
+    id_stride: int = 1
+    pieces_seen: int = 0
+
+    @property
+    def pieces_kept(self) -> int:
+        """Return the number of distinct ids kept."""
+        return int(np.unique(self.ids).shape[0])
+
+    def by_id(self) -> dict[int, np.ndarray]:
+        """Return ``{id: (n, 3) array of t, x, y}`` sorted by id, each sorted by time."""
+        if self.ids.shape[0] == 0:
+            return {}
+        order = np.lexsort((self.t, self.ids))
+        ids = self.ids[order]
+        rows = np.column_stack((self.t[order], self.x[order], self.y[order]))
+        unique, starts = np.unique(ids, return_index=True)
+        return {int(key): part for key, part in zip(unique, np.split(rows, starts[1:]))}
+
+
+@dataclasses.dataclass(frozen=True)
+class ExitEvents:
+    """
+    Every exit read from ``exit_events``, one row per piece, sorted by log time.
+
+    ``t`` (s) log time of the message; ``exit_time`` (s) the point's ``exit_time``
+    (the log time when absent); ``ids`` (int64, -1 when absent); ``x``, ``y``
+    (m); ``mass`` (kg); ``channel`` (1-based; from the angle and the layout when
+    the field is absent).
+    """
+
+    t: np.ndarray
+    exit_time: np.ndarray
+    ids: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    mass: np.ndarray
+    channel: np.ndarray
+
+    def __len__(self) -> int:
+        """Return the number of exits."""
+        return int(self.t.shape[0])
+
+
+@dataclasses.dataclass(frozen=True)
+class ChannelTotals:
+    """Exits per channel: ``count`` (int64) and ``mass`` (kg), index 0 = channel 1."""
+
+    count: np.ndarray
+    mass: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class RunData:
+    """
+    What a report shows, read from one MCAP file.
+
+    ``layout`` and ``cone_radius`` (m) come from the metadata when
+    ``layout_from_metadata`` is true, else from :class:`ModelParams` defaults.
+    ``omega`` is the cone's angular velocity (rad/s) per ``cone_state``
+    message; ``pieces`` the number of points per ``particle_states`` message;
+    ``channel_mass`` the data of the last ``channel_mass`` message (kg, index 0
+    = channel 1) at ``channel_mass_time`` (s), or None. ``topics`` maps each
+    role found to its topic. ``truncated`` describes why reading stopped
+    early (None for a complete file). ``notes`` are shown on the figure.
+    """
+
+    path: pathlib.Path
+    layout: ChannelLayout
+    cone_radius: float
+    layout_from_metadata: bool
+    metadata: dict[str, str]
+    trajectories: Trajectories
+    exits: ExitEvents
+    omega: TimeSeries
+    pieces: TimeSeries
+    channel_mass: np.ndarray | None
+    channel_mass_time: float | None
+    topics: dict[str, str]
+    message_count: int
+    truncated: str | None
+    notes: tuple[str, ...]
+
+    def exit_totals(self) -> ChannelTotals:
+        """Return exits per channel over the layout's channels (more if exits name more)."""
+        return exits_per_channel(self.exits, self.layout.count)
+
+    def time_span(self) -> tuple[float, float] | None:
+        """Return the first and last log time (s) of the data shown, or None without data."""
+        times = [series.t for series in (self.omega, self.pieces) if len(series)]
+        if len(self.exits):
+            times.append(self.exits.t)
+        if not times:
+            return None
+        return (min(float(t[0]) for t in times), max(float(t[-1]) for t in times))
+
+
+# --------------------------------------------------------------------------- decoding
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_point_dtype(
+    fields: tuple[tuple[str, int, int, int], ...], point_step: int, big_endian: bool
+) -> np.dtype:
+    order = '>' if big_endian else '<'
+    names, formats, offsets = [], [], []
+    for name, offset, datatype, count in fields:
+        code = POINT_FIELD_TYPES.get(datatype)
+        if code is None:
+            raise ReportError(f'point field {name!r} has unknown datatype {datatype}')
+        if name in names:
+            raise ReportError(f'point field {name!r} appears twice')
+        size = np.dtype(code).itemsize * max(count, 1)
+        if offset < 0 or offset + size > point_step:
+            raise ReportError(
+                f'point field {name!r} (offset {offset}, {size} bytes) does not fit in '
+                f'point_step {point_step}')
+        names.append(name)
+        formats.append((order + code, (count,)) if count > 1 else order + code)
+        offsets.append(offset)
+    return np.dtype({'names': names, 'formats': formats, 'offsets': offsets,
+                     'itemsize': point_step})
+
+
+def point_dtype(
+    fields: collections.abc.Sequence[collections.abc.Mapping[str, Any]], point_step: int,
+    big_endian: bool = False
+) -> np.dtype:
+    """
+    Return the structured dtype of PointCloud2 points from its ``fields``.
+
+    ``fields`` are sensor_msgs/PointField mappings (``name``, ``offset``,
+    ``datatype``, ``count``); the dtype's itemsize is ``point_step``.
+    """
+    key = tuple((str(f['name']), int(f['offset']), int(f['datatype']), int(f['count']))
+                for f in fields)
+    return _cached_point_dtype(key, int(point_step), bool(big_endian))
+
+
+def cloud_points(cloud: collections.abc.Mapping[str, Any]) -> np.ndarray:
+    """
+    Return the points of a decoded PointCloud2 as a structured array, shape (n,).
+
+    ``n = width * height``; rows are concatenated. The array is a read-only view
+    of ``data`` when the rows are contiguous.
+    """
+    dtype = point_dtype(cloud['fields'], cloud['point_step'], cloud['is_bigendian'])
+    width, height = int(cloud['width']), int(cloud['height'])
+    row_step = int(cloud['row_step'])
+    raw = cloud['data']
+    if isinstance(raw, np.ndarray):  # an encodable message rather than a decoded one
+        data = np.ascontiguousarray(raw).reshape(-1).view(np.uint8)
+    else:
+        data = np.frombuffer(raw, dtype=np.uint8)
+    count = width * height
+    if count == 0:
+        return np.zeros(0, dtype=dtype)
+    row_bytes = width * dtype.itemsize
+    if height == 1 or row_step == row_bytes:
+        needed = (height - 1) * row_step + row_bytes
+        if data.nbytes < needed:
+            raise ReportError(f'PointCloud2 data has {data.nbytes} bytes, {needed} needed')
+        return np.frombuffer(data, dtype=dtype, count=count)
+    if row_step < row_bytes or data.nbytes < (height - 1) * row_step + row_bytes:
+        raise ReportError(
+            f'PointCloud2 rows do not fit: row_step {row_step}, {data.nbytes} bytes of data')
+    return np.concatenate([
+        np.frombuffer(data, dtype=dtype, count=width, offset=row * row_step)
+        for row in range(height)])
+
+
+def _split_schema(name: str, text: str) -> dict[str, str]:
+    """Return ``{type: definition}`` from a ``ros2msg`` schema with its dependencies."""
+    parts = text.split('\n' + SEPARATOR + '\n')
+    result = {normalize_type_name(name): parts[0]}
+    for part in parts[1:]:
+        first, _, body = part.partition('\n')
+        if not first.startswith('MSG: '):
+            raise MessageDefinitionError(f'schema of {name}: dependency without "MSG:" line')
+        result[normalize_type_name(first[5:].strip())] = body
+    return result
+
+
+def _schema_codec(schema: Schema) -> CdrCodec:
+    """Return a codec for the definitions of the file's schema, or the default codec."""
+    if schema.encoding != 'ros2msg':
+        return default_codec()
+    try:
+        registry = MessageDefinitionRegistry(search_prefixes=[])
+        for type_name, text in _split_schema(schema.name, schema.data.decode('utf-8')).items():
+            registry.add_definition(type_name, text)
+        codec = CdrCodec(registry)
+        codec.struct_decoder(schema.name)  # resolves every dependency now
+        return codec
+    except (MessageDefinitionError, CdrError, UnicodeDecodeError):
+        return default_codec()
+
+
+def _topic_role(topic: str, namespace: str | None) -> str | None:
+    """Return the role (key of :data:`TOPIC_TYPES`) of a recorded topic name, if any."""
+    base = topic.rstrip('/').rpartition('/')[2]
+    if base not in TOPIC_TYPES:
+        return None
+    if namespace is not None:
+        expected = '/' + '/'.join(p for p in namespace.split('/') + [base] if p)
+        if '/' + topic.strip('/') != expected:
+            return None
+    return base
+
+
+# --------------------------------------------------------------------------- metadata
+
+
+def _metadata_value(text: str) -> Any:
+    """Return a metadata string as a number or string (YAML scalar rules)."""
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
+def layout_from_metadata(
+    metadata: collections.abc.Mapping[str, str] | None
+) -> tuple[ChannelLayout, float, bool, list[str]]:
+    """
+    Return the channel layout, the cone radius (m), whether they came from metadata, notes.
+
+    ``metadata`` is the ``cone_feeder_sim`` record (None when absent). Keys
+    missing from it keep the :class:`ModelParams` defaults; invalid values make
+    every value fall back to the defaults. Notes say what was assumed.
+    """
+    defaults = ModelParams()
+    if metadata is None:
+        return defaults.channels, defaults.r, False, [
+            f'no {METADATA_NAME!r} metadata record: cone radius and channel layout are the '
+            'ModelParams() defaults']
+    found = {key: _metadata_value(metadata[name]) for key, name in METADATA_KEYS.items()
+             if name in metadata}
+    notes = []
+    missing = [name for name in METADATA_KEYS.values() if name not in metadata]
+    if missing:
+        notes.append(f'metadata lacks {", ".join(missing)}: defaults used for those')
+    if isinstance(found.get('channel_count'), float) and found['channel_count'].is_integer():
+        found['channel_count'] = int(found['channel_count'])
+    try:
+        model = model_params_from_mapping(found, defaults)
+    except ParameterError as err:
+        return defaults.channels, defaults.r, False, [
+            f'invalid metadata ({err}): cone radius and channel layout are the ModelParams() '
+            'defaults']
+    return model.channels, model.r, not missing, notes
+
+
+# --------------------------------------------------------------------------- reading
+
+
+class _TrajectoryCollector:
+    """Keep a bounded, evenly thinned sample of the piece positions while streaming."""
+
+    def __init__(self, max_ids: int, max_points: int) -> None:
+        """Keep at most ``max_ids`` pieces and ``max_points`` points."""
+        self.max_ids = max(1, int(max_ids))
+        self.max_points = max(1, int(max_points))
+        self.message_stride = 1
+        self.id_stride = 1
+        self.messages = 0
+        self.pieces_seen = 0
+        self._previous = np.zeros(0, dtype=np.int64)
+        self._kept_ids: set[int] = set()
+        self._chunks: list[tuple[int, float, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._points = 0
+
+    def add(self, t: float, ids: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
+        """Take the pieces of one ``particle_states`` message."""
+        index = self.messages
+        self.messages += 1
+        ids = ids.astype(np.int64)
+        new = np.setdiff1d(ids, self._previous, assume_unique=True)
+        self._previous = np.sort(ids)
+        self.pieces_seen += int(new.shape[0])
+        kept_new = new[new % self.id_stride == 0]
+        if kept_new.shape[0]:
+            self._kept_ids.update(kept_new.tolist())
+            while len(self._kept_ids) > self.max_ids:
+                self._thin_ids()
+        if index % self.message_stride:
+            return
+        mask = ids % self.id_stride == 0
+        chunk = (index, t, ids[mask], x[mask].astype(np.float32), y[mask].astype(np.float32))
+        self._chunks.append(chunk)
+        self._points += int(chunk[2].shape[0])
+        while self._points > self.max_points and len(self._chunks) > 1:
+            self._thin_messages()
+
+    def _thin_ids(self) -> None:
+        self.id_stride *= 2
+        stride = self.id_stride
+        self._kept_ids = {key for key in self._kept_ids if key % stride == 0}
+        chunks = []
+        for index, t, ids, x, y in self._chunks:
+            mask = ids % stride == 0
+            chunks.append((index, t, ids[mask], x[mask], y[mask]))
+        self._chunks = chunks
+        self._points = sum(chunk[2].shape[0] for chunk in chunks)
+
+    def _thin_messages(self) -> None:
+        self.message_stride *= 2
+        self._chunks = [c for c in self._chunks if c[0] % self.message_stride == 0]
+        self._points = sum(chunk[2].shape[0] for chunk in self._chunks)
+
+    def result(self) -> Trajectories:
+        """Return the kept points."""
+        chunks = self._chunks
+        if not chunks:
+            empty = np.zeros(0)
+            return Trajectories(empty, np.zeros(0, dtype=np.int64), empty, empty,
+                                self.message_stride, self.id_stride, self.pieces_seen)
+        sizes = [chunk[2].shape[0] for chunk in chunks]
+        return Trajectories(
+            t=np.repeat(np.array([chunk[1] for chunk in chunks]), sizes),
+            ids=np.concatenate([chunk[2] for chunk in chunks]),
+            x=np.concatenate([chunk[3] for chunk in chunks]).astype(np.float64),
+            y=np.concatenate([chunk[4] for chunk in chunks]).astype(np.float64),
+            message_stride=self.message_stride, id_stride=self.id_stride,
+            pieces_seen=self.pieces_seen)
+
+
+def _require(points: np.ndarray, names: tuple[str, ...], topic: str) -> None:
+    missing = [name for name in names if name not in (points.dtype.names or ())]
+    if missing:
+        raise ReportError(f'{topic} points lack the field(s) {", ".join(missing)}')
+
+
+class _RunReader:
+    """Accumulate the report's arrays from the records of one file."""
+
+    def __init__(self, namespace: str | None, max_trajectories: int,
+                 max_trajectory_points: int) -> None:
+        """Prepare empty accumulators; see :func:`read_run` for the arguments."""
+        self.namespace = namespace
+        self.schemas: dict[int, Schema] = {}
+        self.codecs: dict[int, CdrCodec] = {}
+        self.channels: dict[int, tuple[str, str, CdrCodec]] = {}
+        self.topics: dict[str, str] = {}
+        self.ignored_topics: dict[str, set[str]] = {}
+        self.metadata: dict[str, str] | None = None
+        self.trajectories = _TrajectoryCollector(max_trajectories, max_trajectory_points)
+        self.pieces_t: list[float] = []
+        self.pieces_n: list[int] = []
+        self.omega_t: list[float] = []
+        self.omega: list[float] = []
+        self.exit_parts: list[tuple[float, np.ndarray]] = []
+        self.channel_mass: np.ndarray | None = None
+        self.channel_mass_time: float | None = None
+        self.message_count = 0
+        self.failures: dict[str, tuple[int, str]] = {}
+
+    def take(self, record: Any) -> None:
+        """Take one record of the stream."""
+        if isinstance(record, Message):
+            self.message_count += 1
+            channel = self.channels.get(record.channel_id)
+            if channel is not None:
+                self._message(channel, record)
+        elif isinstance(record, Schema):
+            self.schemas.setdefault(record.id, record)
+        elif isinstance(record, Channel):
+            self._channel(record)
+        elif isinstance(record, Metadata) and record.name == METADATA_NAME:
+            self.metadata = {**(self.metadata or {}), **dict(record.metadata)}
+
+    def _channel(self, record: Channel) -> None:
+        if record.id in self.channels:
+            return
+        role = _topic_role(record.topic, self.namespace)
+        schema = self.schemas.get(record.schema_id)
+        if role is None or schema is None or record.message_encoding != 'cdr':
+            return
+        try:
+            type_name = normalize_type_name(schema.name)
+        except MessageDefinitionError:
+            return
+        if type_name != TOPIC_TYPES[role]:
+            return
+        if role in self.topics and self.topics[role] != record.topic:
+            self.ignored_topics.setdefault(role, set()).add(record.topic)
+            return
+        if record.schema_id not in self.codecs:
+            self.codecs[record.schema_id] = _schema_codec(schema)
+        self.topics[role] = record.topic
+        self.channels[record.id] = (role, type_name, self.codecs[record.schema_id])
+
+    def _message(self, channel: tuple[str, str, CdrCodec], record: Message) -> None:
+        role, type_name, codec = channel
+        t = record.log_time * 1e-9
+        try:
+            message = codec.decode(type_name, record.data, strict=False)
+            if role == 'particle_states':
+                self._particle_states(t, message)
+            elif role == 'exit_events':
+                self._exit_events(t, message)
+            elif role == 'cone_state':
+                self._cone_state(t, message)
+            else:
+                self.channel_mass = np.asarray(message['data'], dtype=np.float64).copy()
+                self.channel_mass_time = t
+        except (CdrError, ReportError, ValueError, KeyError, TypeError) as err:
+            count, first = self.failures.get(role, (0, str(err)))
+            self.failures[role] = (count + 1, first)
+
+    def _particle_states(self, t: float, message: dict[str, Any]) -> None:
+        points = cloud_points(message)
+        _require(points, ('x', 'y', 'id'), 'particle_states')
+        self.pieces_t.append(t)
+        self.pieces_n.append(int(points.shape[0]))
+        self.trajectories.add(t, points['id'], points['x'], points['y'])
+
+    def _exit_events(self, t: float, message: dict[str, Any]) -> None:
+        points = cloud_points(message)
+        _require(points, ('x', 'y', 'mass'), 'exit_events')
+        if points.shape[0]:
+            self.exit_parts.append((t, points))
+
+    def _cone_state(self, t: float, message: dict[str, Any]) -> None:
+        velocity = np.asarray(message['velocity'], dtype=np.float64)
+        names = list(message['name'])
+        index = names.index('cone') if 'cone' in names else 0
+        if velocity.shape[0] <= index:
+            raise ReportError('cone_state has no velocity of the cone')
+        self.omega_t.append(t)
+        self.omega.append(float(velocity[index]))
+
+    def exits(self, layout: ChannelLayout) -> ExitEvents:
+        """Return the exits read, with channels from the layout where the field is absent."""
+        def column(name: str, dtype: type, default: Any = None) -> np.ndarray:
+            parts = []
+            for t, points in self.exit_parts:
+                if name in (points.dtype.names or ()):
+                    parts.append(points[name].astype(dtype))
+                elif default is None:
+                    parts.append(np.full(points.shape[0], t, dtype=dtype))
+                else:
+                    parts.append(np.full(points.shape[0], default, dtype=dtype))
+            return np.concatenate(parts) if parts else np.zeros(0, dtype=dtype)
+
+        t = np.concatenate([np.full(p.shape[0], t) for t, p in self.exit_parts]) if (
+            self.exit_parts) else np.zeros(0)
+        x, y = column('x', np.float64, 0.0), column('y', np.float64, 0.0)
+        channel = column('channel', np.int64, 0)
+        has_channel = np.concatenate([
+            np.full(p.shape[0], 'channel' in (p.dtype.names or ())) for _, p in self.exit_parts
+        ]) if self.exit_parts else np.zeros(0, dtype=bool)
+        if not has_channel.all():
+            computed = layout.channel_of(np.degrees(np.arctan2(y, x)))
+            channel = np.where(has_channel, channel, computed)
+        order = np.argsort(t, kind='stable')
+        return ExitEvents(
+            t=t[order], exit_time=column('exit_time', np.float64)[order],
+            ids=column('id', np.int64, -1)[order], x=x[order], y=y[order],
+            mass=column('mass', np.float64, 0.0)[order], channel=channel[order])
+
+
+def _series(t: list[float], value: list[Any], dtype: type) -> TimeSeries:
+    times = np.asarray(t, dtype=np.float64)
+    order = np.argsort(times, kind='stable')
+    return TimeSeries(times[order], np.asarray(value, dtype=dtype)[order])
+
+
+def _describe_error(err: BaseException) -> str:
+    if isinstance(err, (EndOfFile, EOFError, struct.error)):
+        return 'the file ends inside a record'
+    text = str(err).strip()
+    return f'{type(err).__name__}: {text}' if text else type(err).__name__
+
+
+def read_run(
+    path: str | os.PathLike, *, namespace: str | None = None,
+    max_trajectories: int = DEFAULT_MAX_TRAJECTORIES,
+    max_trajectory_points: int = DEFAULT_MAX_TRAJECTORY_POINTS,
+) -> RunData:
+    """
+    Read the report's data from the MCAP file at ``path``.
+
+    Topics are matched by their last name part (``/ns/particle_states`` is
+    ``particle_states``) and type; ``namespace`` restricts them to one
+    namespace, otherwise the first topic of each role is used. A file that is
+    cut off or corrupt gives what was read before the damage (see
+    ``RunData.truncated``); a file that is not MCAP raises :class:`ReportError`.
+    """
+    path = pathlib.Path(path)
+    try:
+        stream = open(path, 'rb')
+    except OSError as err:
+        raise ReportError(
+            f'cannot read MCAP file {str(path)!r}: {err.strerror or err}') from err
+    reader = _RunReader(namespace, max_trajectories, max_trajectory_points)
+    truncated: str | None = None
+    with stream:
+        records = StreamReader(stream, validate_crcs=True).records
+        try:
+            header = next(records)
+        except StopIteration:
+            header = None
+        except _READ_ERRORS as err:
+            if isinstance(err, InvalidMagic):
+                reason = 'it does not start with the MCAP magic bytes'
+            elif isinstance(err, (EndOfFile, EOFError, struct.error)):
+                reason = 'it is empty or too short'
+            else:
+                reason = _describe_error(err)
+            raise ReportError(f'{str(path)!r} is not an MCAP file ({reason})') from err
+        if not isinstance(header, Header):
+            raise ReportError(f'{str(path)!r} is not an MCAP file (no header record)')
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                break
+            except _READ_ERRORS as err:
+                truncated = _describe_error(err)
+                break
+            reader.take(record)
+    return _finish(path, reader, truncated)
+
+
+def _finish(path: pathlib.Path, reader: _RunReader, truncated: str | None) -> RunData:
+    layout, radius, from_metadata, notes = layout_from_metadata(reader.metadata)
+    if truncated is not None:
+        notes.insert(0, f'file incomplete or corrupt after {reader.message_count} messages '
+                        f'({truncated}); showing what was readable')
+    for role, (count, first) in sorted(reader.failures.items()):
+        notes.append(f'{count} {role} message(s) could not be read (first: {first})')
+    for role, topics in sorted(reader.ignored_topics.items()):
+        notes.append(f'{role}: using {reader.topics[role]}, ignoring {", ".join(sorted(topics))}')
+    for role in TOPIC_TYPES:
+        if role not in reader.topics:
+            notes.append(f'no {role} topic ({TOPIC_TYPES[role]}) in the file')
+    trajectories = reader.trajectories.result()
+    if trajectories.message_stride > 1 or trajectories.id_stride > 1:
+        stride = trajectories.message_stride
+        notes.append(
+            f'trajectories thinned: {trajectories.pieces_kept} of {trajectories.pieces_seen} '
+            f'pieces drawn (ids divisible by {trajectories.id_stride}), '
+            + ('from every particle_states message' if stride == 1 else
+               f'positions from 1 in {stride} particle_states messages'))
+    return RunData(
+        path=path, layout=layout, cone_radius=radius, layout_from_metadata=from_metadata,
+        metadata=dict(reader.metadata or {}), trajectories=trajectories,
+        exits=reader.exits(layout),
+        omega=_series(reader.omega_t, reader.omega, np.float64),
+        pieces=_series(reader.pieces_t, reader.pieces_n, np.int64),
+        channel_mass=reader.channel_mass, channel_mass_time=reader.channel_mass_time,
+        topics=dict(reader.topics), message_count=reader.message_count, truncated=truncated,
+        notes=tuple(notes))
+
+
+def exits_per_channel(exits: ExitEvents, channel_count: int) -> ChannelTotals:
+    """
+    Return the number and mass (kg) of exits per channel, index 0 = channel 1.
+
+    The arrays have ``channel_count`` entries, more when an exit names a higher
+    channel. Exits with channel 0 (unknown) are not counted.
+    """
+    channel = exits.channel.astype(np.int64)
+    valid = channel >= 1
+    size = max(int(channel_count), int(channel.max()) if channel.shape[0] else 0)
+    count = np.bincount(channel[valid] - 1, minlength=size).astype(np.int64)
+    mass = np.bincount(channel[valid] - 1, weights=exits.mass[valid], minlength=size)
+    return ChannelTotals(count=count, mass=mass.astype(np.float64))
+
+
+def check_channel_mass(run: RunData, totals: ChannelTotals) -> tuple[bool, float] | None:
+    """Return whether the last ``channel_mass`` equals the exit sums and the largest |Δ| (kg)."""
+    if run.channel_mass is None:
+        return None
+    size = max(run.channel_mass.shape[0], totals.mass.shape[0])
+    recorded = np.zeros(size)
+    recorded[:run.channel_mass.shape[0]] = run.channel_mass
+    summed = np.zeros(size)
+    summed[:totals.mass.shape[0]] = totals.mass
+    delta = float(np.max(np.abs(recorded - summed))) if size else 0.0
+    agree = bool(np.allclose(recorded, summed, rtol=1e-9, atol=1e-12))
+    return agree, delta
+
+
+# --------------------------------------------------------------------------- drawing
+
+_FEW_TRAJECTORIES = 10
+_MANY_EXITS = 300
+
+
+def _no_data(ax: Any, text: str) -> None:
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha='center', va='center',
+            color='0.4', fontsize=11)
+
+
+def draw_top_view(ax: Any, run: RunData) -> None:
+    """Draw the trajectories on the cone seen from above, with the channel sectors."""
+    r = run.cone_radius
+    layout = run.layout
+    outer = 1.16 * r
+    for channel in range(1, layout.count + 1):
+        start, end = layout.sector_edges(channel)
+        shade = '0.93' if channel % 2 else '0.85'
+        ax.add_patch(Wedge((0.0, 0.0), outer, start, end, width=outer - r, facecolor=shade,
+                           edgecolor='0.55', linewidth=0.6, zorder=0))
+        angle = math.radians(start)
+        ax.plot([0.0, r * math.cos(angle)], [0.0, r * math.sin(angle)], color='0.75',
+                linewidth=0.6, linestyle=(0, (4, 3)), zorder=1)
+        middle = math.radians(0.5 * (start + end))
+        ax.text(1.08 * r * math.cos(middle), 1.08 * r * math.sin(middle), str(channel),
+                ha='center', va='center', fontsize=9 if layout.count <= 24 else 6,
+                fontweight='bold', zorder=5)
+    ax.add_patch(Circle((0.0, 0.0), r, fill=False, edgecolor='black', linewidth=1.5,
+                        zorder=2))
+    ax.plot([0.0], [0.0], marker='+', color='black', markersize=8, zorder=2)
+    handles = []
+    trajectories = run.trajectories.by_id()
+    exits = run.exits
+    exit_at = {int(i): (float(x), float(y)) for i, x, y in zip(exits.ids, exits.x, exits.y)
+               if i >= 0 and int(i) in trajectories}
+    if trajectories:
+        segments = []
+        for key, rows in trajectories.items():
+            xy = rows[:, 1:3]
+            if key in exit_at:
+                xy = np.vstack((xy, exit_at[key]))
+            segments.append(xy)
+        starts = np.array([rows[0, 1:3] for rows in trajectories.values()])
+        if len(trajectories) <= _FEW_TRAJECTORIES:
+            colors = [f'C{i}' for i in range(len(segments))]
+            for key, xy, color in zip(trajectories, segments, colors):
+                (line,) = ax.plot(xy[:, 0], xy[:, 1], color=color, linewidth=1.4, zorder=3,
+                                  label=f'piece {key}')
+                handles.append(line)
+        else:
+            first_seen = np.array([rows[0, 0] for rows in trajectories.values()])
+            lines = LineCollection(segments, cmap='viridis', linewidths=0.7, alpha=0.75,
+                                   zorder=3)
+            lines.set_array(first_seen)
+            ax.add_collection(lines)
+            colorbar = ax.figure.colorbar(lines, ax=ax, fraction=0.035, pad=0.02)
+            colorbar.set_label('first seen (s)')
+            shown = len(trajectories)
+            handles.append(ax.plot([], [], color='tab:green', linewidth=1.0,
+                                   label=f'trajectories, coloured by first seen ({shown} '
+                                         f'of {run.trajectories.pieces_seen} pieces)')[0])
+        handles.append(ax.scatter(starts[:, 0], starts[:, 1], s=14, facecolor='white',
+                                  edgecolor='black', linewidth=0.7, zorder=4,
+                                  label='first position'))
+    if len(exits):
+        many = len(exits) > _MANY_EXITS
+        ax.scatter(exits.x, exits.y, s=10 if many else 28, marker='o' if many else 'x',
+                   color='tab:red', alpha=0.3 if many else 1.0, linewidth=0.0 if many else 1.2,
+                   zorder=6)
+        handles.append(ax.plot([], [], linestyle='none', marker='o' if many else 'x',
+                               markersize=5, color='tab:red', label=f'exit ({len(exits)})')[0])
+    limit = 1.22 * r
+    ax.set_xlim(-limit, limit)
+    ax.set_ylim(-limit, limit)
+    ax.set_aspect('equal')
+    ax.set_xlabel('x (m)')
+    ax.set_ylabel('y (m)')
+    ax.grid(True, linewidth=0.3, alpha=0.5)
+    source = 'metadata' if run.layout_from_metadata else 'defaults'
+    ax.set_title(
+        f'Top view: trajectories on the cone (r = {r:.3f} m, {layout.count} channels '
+        f'numbered {layout.numbering.replace("_", " ")}; {source})', fontsize=10)
+    if not trajectories and not len(exits):
+        _no_data(ax, 'no particle_states or exit_events')
+    if handles:
+        ax.legend(handles=handles, loc='upper center', bbox_to_anchor=(0.5, -0.07),
+                  ncol=min(4, len(handles)), fontsize=8.5, frameon=False)
+
+
+def draw_exits(ax: Any, run: RunData) -> None:
+    """Draw exits per channel: count (left axis) and mass (right axis), with channel_mass."""
+    totals = run.exit_totals()
+    channels = np.arange(1, totals.count.shape[0] + 1)
+    width = 0.4
+    count_bars = ax.bar(channels - width / 2, totals.count, width, color='tab:blue',
+                        label='exits (count)')
+    ax.set_xlabel('channel')
+    ax.set_ylabel('exits (count)', color='tab:blue')
+    ax.tick_params(axis='y', labelcolor='tab:blue')
+    ax.set_xticks(channels)
+    ax.set_xlim(0.4, channels[-1] + 0.6 if channels.shape[0] else 1.6)
+    ax.yaxis.get_major_locator().set_params(integer=True)
+    ax.set_ylim(0, max(1, int(totals.count.max(initial=0))) * 1.3)
+    mass_ax = ax.twinx()
+    mass_bars = mass_ax.bar(channels + width / 2, totals.mass, width, color='tab:orange',
+                            label='mass from exit_events (kg)')
+    mass_ax.set_ylabel('mass (kg)', color='tab:orange')
+    mass_ax.tick_params(axis='y', labelcolor='tab:orange')
+    handles = [count_bars, mass_bars]
+    top = float(totals.mass.max(initial=0.0))
+    check = check_channel_mass(run, totals)
+    if run.channel_mass is not None:
+        recorded = run.channel_mass
+        handles.append(mass_ax.scatter(
+            np.arange(1, recorded.shape[0] + 1) + width / 2, recorded, marker='D', s=22,
+            color='black', zorder=5,
+            label=f'last channel_mass (t = {run.channel_mass_time:.2f} s)'))
+        top = max(top, float(recorded.max(initial=0.0)))
+    mass_ax.set_ylim(0, (top if top > 0 else 1.0) * 1.3)
+    total_mass = float(totals.mass.sum())
+    title = f'Exits per channel: {int(totals.count.sum())} pieces, {total_mass:.3f} kg'
+    if check is not None:
+        agree, delta = check
+        title += ('; channel_mass agrees' if agree else
+                  f'; channel_mass differs by up to {delta:.4g} kg')
+    ax.set_title(title, fontsize=10)
+    ax.legend(handles=handles, loc='upper left', fontsize=8, framealpha=0.85, ncol=3)
+
+
+def draw_omega(ax: Any, run: RunData) -> None:
+    """Draw the cone's angular velocity over simulation time."""
+    if len(run.omega):
+        ax.plot(run.omega.t, run.omega.value, color='tab:purple', linewidth=1.2,
+                label=r'cone $\omega$')
+    else:
+        _no_data(ax, 'no cone_state messages')
+    ax.axhline(0.0, color='0.5', linewidth=0.6)
+    ax.set_ylabel(r'$\omega$ (rad/s)')
+    ax.set_title(r'Cone angular velocity $\omega(t)$ (> 0: counter-clockwise from above)',
+                 fontsize=10)
+    ax.grid(True, linewidth=0.3, alpha=0.5)
+
+
+def draw_pieces(ax: Any, run: RunData) -> None:
+    """Draw the number of pieces on the cone and the cumulative exits over time."""
+    handles = []
+    if len(run.pieces):
+        handles.append(ax.step(run.pieces.t, run.pieces.value, where='post',
+                               color='tab:green', linewidth=1.2, label='pieces on the cone')[0])
+    if len(run.exits):
+        span = run.time_span()
+        end = span[1] if span is not None else float(run.exits.t[-1])
+        start = span[0] if span is not None else float(run.exits.t[0])
+        t = np.concatenate(([start], run.exits.t, [end]))
+        n = np.concatenate(([0], np.arange(1, len(run.exits) + 1), [len(run.exits)]))
+        handles.append(ax.step(t, n, where='post', color='tab:red', linewidth=1.2,
+                               label='exits so far')[0])
+    if not handles:
+        _no_data(ax, 'no particle_states or exit_events messages')
+    else:
+        ax.legend(handles=handles, loc='best', fontsize=8, framealpha=0.85)
+    ax.set_ylim(bottom=0)
+    ax.yaxis.get_major_locator().set_params(integer=True)
+    ax.set_xlabel('simulation time (s)')
+    ax.set_ylabel('pieces')
+    ax.set_title('Pieces on the cone and exits over time', fontsize=10)
+    ax.grid(True, linewidth=0.3, alpha=0.5)
+
+
+def _summary_line(run: RunData) -> str:
+    span = run.time_span()
+    parts = [f'{run.message_count} messages']
+    if span is not None:
+        parts.insert(0, f'simulation time {span[0]:.2f} to {span[1]:.2f} s')
+    parts.append(f'{run.trajectories.pieces_seen} pieces seen')
+    parts.append(f'{len(run.exits)} exits')
+    for key in ('source', 'version', 'seed', 'feed.seed'):
+        if run.metadata.get(key):
+            parts.append(f'{key} {run.metadata[key]}')
+    return ' | '.join(parts)
+
+
+def build_figure(run: RunData, *, dpi: float = 100.0) -> Figure:
+    """Return the report page of ``run`` (a matplotlib Figure on an Agg canvas)."""
+    figure = Figure(figsize=(17.0, 9.6), dpi=dpi)
+    FigureCanvasAgg(figure)
+    notes = list(run.notes[:6])
+    if len(run.notes) > 6:
+        notes.append(f'... and {len(run.notes) - 6} more notes')
+    bottom = 0.065 + 0.018 * len(notes)
+    left = figure.add_gridspec(1, 1, left=0.04, right=0.47, top=0.89, bottom=bottom + 0.07)
+    right = figure.add_gridspec(3, 1, left=0.55, right=0.95, top=0.89, bottom=bottom,
+                                hspace=0.42)
+    draw_top_view(figure.add_subplot(left[0, 0]), run)
+    draw_exits(figure.add_subplot(right[0, 0]), run)
+    omega_ax = figure.add_subplot(right[1, 0])
+    pieces_ax = figure.add_subplot(right[2, 0], sharex=omega_ax)
+    draw_omega(omega_ax, run)
+    draw_pieces(pieces_ax, run)
+    omega_ax.tick_params(labelbottom=True)
+    figure.suptitle(f'Cone feeder run: {run.path.name}', fontsize=15, fontweight='bold',
+                    y=0.985)
+    figure.text(0.5, 0.935, _summary_line(run), ha='center', fontsize=10, color='0.25')
+    for i, note in enumerate(notes):
+        figure.text(0.01, 0.012 + 0.018 * (len(notes) - 1 - i), f'Note: {note}',
+                    fontsize=8.5, color='darkred' if i == 0 and run.truncated else '0.2')
+    return figure
+
+
+def write_report(
+    mcap_path: str | os.PathLike, out_path: str | os.PathLike, *, dpi: float = 100.0,
+    namespace: str | None = None, max_trajectories: int = DEFAULT_MAX_TRAJECTORIES,
+    max_trajectory_points: int = DEFAULT_MAX_TRAJECTORY_POINTS,
+) -> RunData:
+    """Read ``mcap_path``, write the report PNG to ``out_path`` and return the data shown."""
+    run = read_run(mcap_path, namespace=namespace, max_trajectories=max_trajectories,
+                   max_trajectory_points=max_trajectory_points)
+    figure = build_figure(run, dpi=dpi)
+    out = pathlib.Path(out_path)
+    try:
+        figure.savefig(out, format='png', dpi=dpi)
+    except OSError as err:
+        raise ReportError(f'cannot write report {str(out)!r}: {err.strerror or err}') from err
+    return run
