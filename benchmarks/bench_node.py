@@ -118,6 +118,8 @@ def measure(context: Context, count: int, args: argparse.Namespace) -> dict[str,
         Parameter('initial_pieces.d'),  # NOT_SET: the default product for every piece
         Parameter('diagnostics.period', value=3600.0),
         Parameter('start_paused', value=True),
+        Parameter('record_path', value=str(Path(args.record) / f'bench_{count}.mcap')
+                  if args.record else ''),
     ]
     node = SimNode(context=context, parameter_overrides=params, namespace='/bench')
     executor = SingleThreadedExecutor(context=context)
@@ -196,6 +198,8 @@ def main() -> int:
                         help='relative resolution of the bisection')
     parser.add_argument('--counts', type=int, nargs='*', help='measure these counts only')
     parser.add_argument('--cpu', type=int, default=0, help='core to pin to (-1: no pinning)')
+    parser.add_argument('--record', metavar='DIR', default=None,
+                        help='record every run to DIR/bench_COUNT.mcap (default: no recording)')
     parser.add_argument('--subscriber', action='store_true',
                         help='run a subscriber process on another core')
     parser.add_argument('--domain', type=int, default=None, help='ROS_DOMAIN_ID')

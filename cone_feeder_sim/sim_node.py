@@ -87,8 +87,11 @@ parameter files (``2.0``, not ``2``); an empty array (``[]``) means "none".
 
 from collections.abc import Callable
 from dataclasses import dataclass, fields
-import math
+import datetime
+import json
+import os
 from pathlib import Path
+import signal
 import sys
 import time
 from typing import Any
@@ -107,29 +110,45 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import JointState, PointCloud2
-from std_msgs.msg import Float64, Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
+from . import __version__
+from . import messages
 from .cdr import CdrError, default_codec
 from .config import config_dir, DEFAULT_PARAMETER_FILE, read_yaml
 from .engine import (
     DriveParams, EngineConfig, FeederEngine, FeedParams, pattern_from_flat, PieceSpec,
     TickResult)
 from .errors import ConeFeederError, ParameterError
+from .messages import (
+    channel_mass_message, clock_message, cone_state_message, EXIT_DATATYPES, EXIT_DTYPE,
+    exits_message, header, MarkerBuilder, MarkerSchedule, MessageRecord, particles_message,
+    point_fields, stamp, stamp_ns, STATE_DATATYPES, STATE_DTYPE, states_message, TOPICS)
 from .params import (
     CHANNEL_KEYS, MODEL_KEYS, MODEL_LIMITS, model_params_from_mapping, ModelParams,
     PRODUCT_LIMITS, SolverParams)
+from .playback import load_resim_plan, ResimPlan
 from .recording import QosProfile
+from .runlog import (
+    DEFAULT_RECORD_PATH, engine_config_json, engine_input_from_event,
+    event_text, expand_record_path, FORMAT_VERSION, input_event, INPUT_EVENTS, METADATA_NAME,
+    model_parameter_values, parameter_text, RunRecorder, to_jsonable)
 from .simulation import check_positions
 
 __all__ = [
+    'EXIT_DATATYPES',
+    'EXIT_DTYPE',
     'MessageRecord',
     'ParamSpec',
+    'STATE_DATATYPES',
+    'STATE_DTYPE',
     'SimNode',
     'TopicInfo',
     'main',
     'parameter_specs',
+    'point_fields',
 ]
 
 NODE_NAME = 'sim_node'
@@ -146,70 +165,34 @@ DEFAULT_D_VALUES = (30.0, 135.0, 225.0, 750.0)
 
 # --------------------------------------------------------------------------- QoS
 
-STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
-EVENTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                        reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.VOLATILE)
-LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                         reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
-COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                         reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.VOLATILE)
 
-# --------------------------------------------------------------------------- point layouts
-
-# sensor_msgs/PointField datatypes
-UINT32 = 6
-FLOAT32 = 7
-FLOAT64 = 8
-
-STATE_DTYPE = np.dtype({
-    'names': ['x', 'y', 'z', 'vx', 'vy', 'vz', 'id', 'mass'],
-    'formats': ['<f4'] * 6 + ['<u4', '<f4'],
-    'offsets': [0, 4, 8, 12, 16, 20, 24, 28],
-    'itemsize': 32})
-STATE_DATATYPES = [FLOAT32] * 6 + [UINT32, FLOAT32]
-
-EXIT_DTYPE = np.dtype({
-    'names': ['x', 'y', 'z', 'vx', 'vy', 'vz', 'exit_time', 'angle', 'mass', 'id', 'channel'],
-    'formats': ['<f8'] * 9 + ['<u4', '<u4'],
-    'offsets': [0, 8, 16, 24, 32, 40, 48, 56, 64, 72, 76],
-    'itemsize': 80})
-EXIT_DATATYPES = [FLOAT64] * 9 + [UINT32, UINT32]
+def _rclpy_qos(profile: QosProfile) -> QoSProfile:
+    """Return rclpy's QoS profile of a recorder profile (history, depth, reliability...)."""
+    return QoSProfile(
+        history=(HistoryPolicy.KEEP_LAST if profile.history == 'keep_last'
+                 else HistoryPolicy.KEEP_ALL),
+        depth=profile.depth,
+        reliability=(ReliabilityPolicy.RELIABLE if profile.reliability == 'reliable'
+                     else ReliabilityPolicy.BEST_EFFORT),
+        durability=(DurabilityPolicy.TRANSIENT_LOCAL if profile.durability == 'transient_local'
+                    else DurabilityPolicy.VOLATILE))
 
 
-def point_fields(dtype: np.dtype, datatypes: list[int]) -> list[dict[str, Any]]:
-    """Return the sensor_msgs/PointField list describing a structured dtype."""
-    return [{'name': name, 'offset': dtype.fields[name][1], 'datatype': datatype, 'count': 1}
-            for name, datatype in zip(dtype.names, datatypes)]
+STATE_QOS = _rclpy_qos(messages.STATE_QOS)
+EVENTS_QOS = _rclpy_qos(messages.EVENTS_QOS)
+LATCHED_QOS = _rclpy_qos(messages.LATCHED_QOS)
+CLOCK_QOS = _rclpy_qos(messages.CLOCK_QOS)
+COMMAND_QOS = _rclpy_qos(messages.COMMAND_QOS)
 
+#: Parameters that re-simulation does not take from the recording (wall-clock pacing,
+#: start state of the timer, the outputs of this run).
+LIVE_PARAMETERS = ('real_time_factor', 'start_paused', 'diagnostics.period', 'record_path',
+                   'replay_commands')
+#: Run-time parameters that change what the simulation does (refused while re-simulating).
+RUN_PARAMETERS = ('max_angular_velocity', 'max_angular_acceleration', 'cmd_timeout',
+                  'open_loop_pattern', 'markers.rate')
 
 # --------------------------------------------------------------------------- hooks
-
-
-@dataclass(frozen=True)
-class MessageRecord:
-    """
-    One message as it went over the wire.
-
-    direction: 'out' (published) or 'in' (received); topic: the fully resolved name;
-    type_name: 'pkg/msg/Type'; data: the serialized CDR bytes (with encapsulation header);
-    stamp_ns: simulation time (ns) of the message (received: the engine time on arrival);
-    wall_ns: system time (ns) when it was published or received.
-    """
-
-    direction: str
-    topic: str
-    type_name: str
-    data: bytes
-    stamp_ns: int
-    wall_ns: int
 
 
 @dataclass(frozen=True)
@@ -223,16 +206,6 @@ class TopicInfo:
 
 
 MessageHook = Callable[[MessageRecord], None]
-
-
-def _recording_qos(qos: QoSProfile) -> QosProfile:
-    return QosProfile(
-        history='keep_last' if qos.history == HistoryPolicy.KEEP_LAST else 'keep_all',
-        depth=int(qos.depth),
-        reliability=('reliable' if qos.reliability == ReliabilityPolicy.RELIABLE
-                     else 'best_effort'),
-        durability=('transient_local' if qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                    else 'volatile'))
 
 
 # --------------------------------------------------------------------------- parameters
@@ -315,24 +288,14 @@ _SOLVER_SPECS = (
 )
 
 
-def _model_value(model: ModelParams, key: str) -> Any:
-    if key in PRODUCT_LIMITS:
-        return float(getattr(model.product, key))
-    if key in CHANNEL_KEYS:
-        value = getattr(model.channels, CHANNEL_KEYS[key])
-        return int(value) if key == 'channel_count' else (
-            float(value) if key == 'channel_boundary' else value)
-    value = getattr(model, key)
-    return value if isinstance(value, str) else float(value)
-
-
 def model_param_specs(base: ModelParams) -> list[ParamSpec]:
     """Return the read-only ``model.<key>`` parameters with defaults from ``base``."""
     specs = []
+    defaults = model_parameter_values(base)
     for key in list(PRODUCT_LIMITS) + list(MODEL_KEYS) + list(CHANNEL_KEYS):
         limit = PRODUCT_LIMITS.get(key) or MODEL_LIMITS.get(key)
         specs.append(ParamSpec(
-            f'model.{key}', _model_value(base, key), _MODEL_DESCRIPTIONS[key],
+            f'model.{key}', defaults[f'model.{key}'], _MODEL_DESCRIPTIONS[key],
             limits=None if limit is None else (limit.lo, limit.hi),
             constraints='' if limit is None else f'allowed {limit.describe()}'))
     return specs
@@ -391,6 +354,14 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
                   'one per tick); 0 = none', dynamic=True, limits=(0.0, 1000.0)),
         ParamSpec('diagnostics.period', 1.0, 'wall-clock seconds between /diagnostics messages',
                   dynamic=True, limits=(0.05, 3600.0)),
+        ParamSpec('record_path', DEFAULT_RECORD_PATH, 'MCAP file of this run (every published '
+                  'topic, every received command, the applied inputs, the parameters); '
+                  'strftime fields are filled in (an existing file gets _2, _3, ...); '
+                  'missing directories are created; empty: no recording'),
+        ParamSpec('replay_commands', '', 'MCAP file of an earlier sim_node run to re-simulate: '
+                  'its parameters, initial state and applied inputs (at the same ticks) drive '
+                  'this run, live inputs are refused until its last tick, then the node '
+                  'pauses; empty: a live run'),
     ]
     specs += [ParamSpec(f'solver.{key}', getattr(solver, key), text, limits=limits)
               for key, text, limits in _SOLVER_SPECS]
@@ -468,16 +439,6 @@ def load_base_model(parameter_file: str) -> ModelParams:
         raise ParameterError(f'{path}: {exc}') from exc
 
 
-def _stamp(t: float) -> dict[str, int]:
-    ns = int(round(t * 1e9))
-    sec, nanosec = divmod(ns, 1_000_000_000)
-    return {'sec': sec, 'nanosec': nanosec}
-
-
-def _color(r: float, g: float, b: float, a: float = 1.0) -> dict[str, float]:
-    return {'r': r, 'g': g, 'b': b, 'a': a}
-
-
 @dataclass(frozen=True)
 class _Output:
     """A publisher with its resolved topic, type name and CDR encoder."""
@@ -520,20 +481,34 @@ class SimNode(Node):
         self._codec = default_codec()
         self._hooks: list[MessageHook] = []
         self._topics: dict[str, TopicInfo] = {}
-        file_param = self.declare_parameter(
-            'parameter_file', '', parameter_specs()[0].descriptor()).value
-        self._base_model = load_base_model(file_param)
+        self._topic_names: dict[str, str] = {}
+        self._recorder: RunRecorder | None = None
+        self._resim: ResimPlan | None = None
+        self._resim_active = False
+        specs = {s.name: s for s in parameter_specs()}
+        replay = self.declare_parameter(
+            'replay_commands', '', specs['replay_commands'].descriptor()).value
+        if replay:
+            self._resim = load_resim_plan(replay)
+            self._resim_active = True
+        file_param = self._declare(specs['parameter_file']).value
+        if self._resim is not None:
+            # every model.<key> is recorded: the model does not depend on the file any more
+            self._base_model = model_params_from_mapping({
+                name[len('model.'):]: value for name, value in self._resim.parameters.items()
+                if name.startswith('model.')})
+        else:
+            self._base_model = load_base_model(file_param)
         self._specs = {s.name: s for s in parameter_specs(self._base_model)}
         for spec in self._specs.values():
-            if spec.name != 'parameter_file':
-                self.declare_parameter(spec.name, spec.default, spec.descriptor())
+            if spec.name not in ('parameter_file', 'replay_commands'):
+                self._declare(spec)
         values = self._values()
         self._engine = FeederEngine(engine_config_from_values(values, self._base_model))
         self._frame = str(values['frame_id'])
         self._rtf = float(values['real_time_factor'])
-        self._marker_rate = float(values['markers.rate'])
+        self._markers = MarkerSchedule(float(values['markers.rate']))
         self._paused = False
-        self._last_markers_t = -math.inf
         self._total_exits = 0
         self._total_failures = 0
         self._refused = 0
@@ -543,48 +518,198 @@ class SimNode(Node):
         self._window = _Window(time.perf_counter(), self._engine.t)
         self._timing = [0, 0.0, 0.0]  # ticks, step s, publish s since the start
 
-        self._pub_particles = self._publisher(PoseArray, 'particles', STATE_QOS)
-        self._pub_states = self._publisher(PointCloud2, 'particle_states', STATE_QOS)
-        self._pub_exits = self._publisher(PointCloud2, 'exit_events', EVENTS_QOS)
-        self._pub_channel = self._publisher(Float64MultiArray, 'channel_mass', LATCHED_QOS)
-        self._pub_cone = self._publisher(JointState, 'cone_state', STATE_QOS)
-        self._pub_markers = self._publisher(MarkerArray, 'markers', LATCHED_QOS)
-        self._pub_diag = self._publisher(DiagnosticArray, '/diagnostics', STATE_QOS)
-        self._pub_clock = (self._publisher(ClockMessage, '/clock', CLOCK_QOS)
+        self._pub_particles = self._publisher(PoseArray, 'particles')
+        self._pub_states = self._publisher(PointCloud2, 'particle_states')
+        self._pub_exits = self._publisher(PointCloud2, 'exit_events')
+        self._pub_channel = self._publisher(Float64MultiArray, 'channel_mass')
+        self._pub_cone = self._publisher(JointState, 'cone_state')
+        self._pub_markers = self._publisher(MarkerArray, 'markers')
+        self._pub_diag = self._publisher(DiagnosticArray, '/diagnostics')
+        self._pub_clock = (self._publisher(ClockMessage, '/clock')
                            if values['publish_clock'] else None)
+        self._pub_events = self._publisher(String, '~/events')
         self._sub_cmd = self.create_subscription(
             Float64, 'rotation_cmd', self._on_rotation_cmd, COMMAND_QOS, raw=True)
         self._sub_spawn = self.create_subscription(
             PoseArray, 'spawn', self._on_spawn, COMMAND_QOS, raw=True)
-        for sub, type_name in ((self._sub_cmd, 'std_msgs/msg/Float64'),
-                               (self._sub_spawn, 'geometry_msgs/msg/PoseArray')):
-            self._topics[sub.topic_name] = TopicInfo(sub.topic_name, type_name, 'in',
-                                                     _recording_qos(COMMAND_QOS))
+        for sub, name in ((self._sub_cmd, 'rotation_cmd'), (self._sub_spawn, 'spawn')):
+            spec = TOPICS[name]
+            self._topics[sub.topic_name] = TopicInfo(sub.topic_name, spec.type_name, 'in',
+                                                     spec.qos)
+            self._topic_names[name] = sub.topic_name
         self._srv_reset = self.create_service(Trigger, '~/reset', self._on_reset)
         self._srv_pause = self.create_service(SetBool, '~/pause', self._on_pause)
         self._srv_step = self.create_service(Trigger, '~/step', self._on_step)
 
-        self._static_markers = self._build_static_markers()
+        self._marker_builder = MarkerBuilder(self._engine.model, self._frame, self._codec)
+        self._start_recording(values)
+        if self._resim is not None:
+            self._check_resim_config()
+        start_paused = bool(values['start_paused'])
         self._tick_timer = self.create_timer(self._tick_period(), self._on_timer,
-                                             clock=self._steady,
-                                             autostart=not values['start_paused'])
-        self._paused = bool(values['start_paused'])
+                                             clock=self._steady, autostart=not start_paused)
+        self._paused = start_paused
         self._diag_timer = self.create_timer(float(values['diagnostics.period']),
                                              self._publish_diagnostics, clock=self._steady)
+        self._flush_timer = (self.create_timer(0.25, self._on_flush_timer, clock=self._steady)
+                             if self._recorder is not None else None)
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.get_logger().info(
             f'simulating {self._engine.piece_count} pieces, dt = {self._engine.dt:g} s, '
             f'real_time_factor = {self._rtf:g}, feed {self._engine.feed.rate:g} pieces/s')
+        if self._resim is not None and self._resim.ticks == 0:
+            self._finish_resim()
+
+    def _declare(self, spec: 'ParamSpec') -> Parameter:
+        """Declare a parameter; while re-simulating, take recorded values over given ones."""
+        plan = self._resim
+        if plan is None or spec.name in LIVE_PARAMETERS or spec.name not in plan.parameters:
+            return self.declare_parameter(spec.name, spec.default, spec.descriptor())
+        value = plan.parameters[spec.name]
+        if value is None or value == []:
+            value = spec.type_()  # an empty array: declared without a value, as '[]' does
+        return self.declare_parameter(spec.name, value, spec.descriptor(),
+                                      ignore_override=True)
+
+    # ------------------------------------------------------------------ recording
+
+    def _start_recording(self, values: dict[str, Any]) -> None:
+        """Open the MCAP file of this run (refused with a clear error if impossible)."""
+        template = str(values['record_path'])
+        if not template:
+            return
+        path = expand_record_path(template).absolute()
+        topics = [(info.topic, info.type_name, info.qos) for info in self._topics.values()]
+        self._recorder = RunRecorder(path, topics, {METADATA_NAME: self._metadata(values)})
+        self.add_message_hook(self._recorder.hook)
+        self.get_logger().info(f'recording to {path}')
+
+    def _metadata(self, values: dict[str, Any]) -> dict[str, str]:
+        """Return the cone_feeder_sim metadata: parameters and what re-simulation needs."""
+        data = {name: parameter_text(value) for name, value in values.items()}
+        data.update({
+            'format': FORMAT_VERSION,
+            'version': __version__,
+            'source': 'sim_node',
+            'node': self.get_fully_qualified_name(),
+            'namespace': self.get_namespace(),
+            'dt': repr(self._engine.dt),
+            'seed': str(self._engine.config.seed),
+            'model_options': json.dumps({
+                'normal_force': self._engine.model.normal_force,
+                'friction_direction': self._engine.model.friction_direction}),
+            'engine_config': engine_config_json(self._engine.config),
+            'parameters_json': json.dumps(to_jsonable(values)),
+            'topics': json.dumps(self._topic_names),
+            'input_topics': json.dumps(sorted(
+                info.topic for info in self._topics.values() if info.direction == 'in')),
+            'created': datetime.datetime.now().astimezone().isoformat(timespec='seconds'),
+            'ros_distro': os.environ.get('ROS_DISTRO', ''),
+        })
+        return data
+
+    def _on_flush_timer(self) -> None:
+        recorder = self._recorder
+        if recorder is None:
+            return
+        if recorder.error is not None:
+            self.get_logger().error(
+                f'recording to {recorder.path} stopped: {recorder.error}',
+                throttle_duration_sec=60.0)
+        recorder.maybe_flush()
+
+    def close_recording(self) -> None:
+        """Finish the MCAP file (summary, statistics); idempotent. destroy_node() calls it."""
+        recorder = getattr(self, '_recorder', None)
+        if recorder is None or recorder.closed:
+            return
+        if recorder.hook in self._hooks:
+            self.remove_message_hook(recorder.hook)
+        recorder.close(end_metadata={
+            'ticks': str(self._engine.tick_index), 'end_time': repr(self._engine.t),
+            'exits': str(self._total_exits), 'failures': str(self._total_failures),
+            'refused_inputs': str(self._refused)})
+        if recorder.error is not None:
+            self.get_logger().error(f'recording {recorder.path} is incomplete: '
+                                    f'{recorder.error}')
+        else:
+            self.get_logger().info(f'recorded {recorder.message_count} messages to '
+                                   f'{recorder.path}')
+
+    @property
+    def recording_path(self) -> Path | None:
+        """Return the path of this run's MCAP file (None when not recording)."""
+        return None if self._recorder is None else self._recorder.path
+
+    def destroy_node(self) -> None:
+        """Finish the recording, then destroy the node's handles."""
+        try:
+            self.close_recording()
+        finally:
+            super().destroy_node()
+
+    # ------------------------------------------------------------------ re-simulation
+
+    def _check_resim_config(self) -> None:
+        plan = self._resim
+        assert plan is not None
+        if plan.engine_config and plan.engine_config != engine_config_json(self._engine.config):
+            self.get_logger().warning(
+                f'the engine configuration built from the parameters of {plan.path} differs '
+                'from the recorded one (recorded by another version?): the re-simulation may '
+                'differ')
+        if plan.problem:
+            self.get_logger().warning(f'{plan.path} is incomplete ({plan.problem}): '
+                                      f're-simulating its {plan.ticks} readable ticks')
+        count = sum(len(v) for v in plan.events.values())
+        self.get_logger().info(
+            f're-simulating {plan.path}: {plan.ticks} ticks, {count} recorded events; '
+            'parameters, initial pieces and inputs come from the recording')
+
+    @property
+    def replaying(self) -> bool:
+        """Tell whether the node is re-simulating a recording (until its last tick)."""
+        return self._resim_active
+
+    def _apply_recorded(self) -> None:
+        """Submit the recorded inputs of the next tick (re-simulation)."""
+        plan = self._resim
+        assert plan is not None
+        for event in plan.events.get(self._engine.tick_index, ()):
+            kind = event.get('event')
+            if kind in INPUT_EVENTS:
+                self._engine.submit(engine_input_from_event(event))
+            elif kind == 'parameters' and 'markers.rate' in event.get('values', {}):
+                self._markers.rate = float(event['values']['markers.rate'])
+
+    def _finish_resim(self) -> None:
+        self._resim_active = False
+        plan = self._resim
+        assert plan is not None
+        self.set_paused(True)
+        self.get_logger().info(
+            f're-simulation of {plan.path} done after {plan.ticks} ticks (t = '
+            f'{self._engine.t:.6f} s); paused: resume with ~/pause false to go on live')
+
+    def _refuse_live(self, what: str) -> bool:
+        """Refuse a live input while re-simulating; return whether it was refused."""
+        if not self._resim_active:
+            return False
+        self._refused += 1
+        self.get_logger().warning(f'{what} refused: re-simulating a recording',
+                                  throttle_duration_sec=1.0)
+        return True
 
     # ------------------------------------------------------------------ plumbing
 
-    def _publisher(self, msg_type: Any, topic: str, qos: QoSProfile) -> '_Output':
-        pub = self.create_publisher(msg_type, topic, qos)
-        type_name = msg_type.__module__.split('.')[0] + '/msg/' + msg_type.__name__
-        self._topics[pub.topic_name] = TopicInfo(pub.topic_name, type_name, 'out',
-                                                 _recording_qos(qos))
-        return _Output(pub, pub.topic_name, type_name, self._codec.encoder(type_name))
+    def _publisher(self, msg_type: Any, name: str) -> '_Output':
+        spec = TOPICS[name]
+        pub = self.create_publisher(msg_type, name, _rclpy_qos(spec.qos))
+        self._topics[pub.topic_name] = TopicInfo(pub.topic_name, spec.type_name, 'out',
+                                                 spec.qos)
+        self._topic_names[name] = pub.topic_name
+        return _Output(pub, pub.topic_name, spec.type_name, self._codec.encoder(spec.type_name))
 
     def _values(self) -> dict[str, Any]:
         # get_parameter_or: an empty list in a parameter file leaves an array NOT_SET
@@ -641,7 +766,16 @@ class SimNode(Node):
         return self._last_tick
 
     def _now_ns(self) -> int:
-        return int(round(self._engine.t * 1e9))
+        return stamp_ns(self._engine.t)
+
+    def _publish_event(self, event: dict[str, Any], time_ns: int | None = None) -> None:
+        """Publish an event on ~/events (and so record it)."""
+        self._publish(self._pub_events, {'data': event_text(event)},
+                      self._now_ns() if time_ns is None else time_ns)
+
+    def _node_event(self, kind: str, **fields: Any) -> None:
+        self._publish_event({'event': kind, 'tick': self._engine.tick_index,
+                             't': self._engine.t, **fields})
 
     # ------------------------------------------------------------------ inputs
 
@@ -649,6 +783,8 @@ class SimNode(Node):
         if self._hooks:
             self._emit(MessageRecord('in', self._sub_cmd.topic_name, 'std_msgs/msg/Float64',
                                      bytes(data), self._now_ns(), time.time_ns()))
+        if self._refuse_live('rotation_cmd'):
+            return
         try:
             value = self._codec.decode('std_msgs/msg/Float64', data, strict=False)['data']
             self._engine.command(value)
@@ -667,6 +803,8 @@ class SimNode(Node):
             self._emit(MessageRecord('in', self._sub_spawn.topic_name,
                                      'geometry_msgs/msg/PoseArray', bytes(data),
                                      self._now_ns(), time.time_ns()))
+        if self._refuse_live('spawn'):
+            return
         try:
             msg = self._codec.decode('geometry_msgs/msg/PoseArray', data, strict=False)
         except CdrError as exc:
@@ -709,6 +847,10 @@ class SimNode(Node):
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response
                   ) -> Trigger.Response:
+        if self._refuse_live('reset'):
+            response.success = False
+            response.message = 're-simulating a recording: live inputs are refused until its end'
+            return response
         self._engine.reset()
         response.success = True
         response.message = 'reset queued: applied at the start of the next tick'
@@ -729,6 +871,7 @@ class SimNode(Node):
             response.success = False
             response.message = 'not paused: call ~/pause with data: true first'
             return response
+        self._node_event('step')
         result = self.step()
         response.success = True
         response.message = f'stepped to t = {result.t:.6f} s ({result.count} pieces)'
@@ -741,6 +884,7 @@ class SimNode(Node):
                 return 'already paused'
             self._tick_timer.cancel()
             self._paused = True
+            self._node_event('pause')
             return f'paused at t = {self._engine.t:.6f} s'
         if not self._paused:
             return 'already running'
@@ -748,6 +892,7 @@ class SimNode(Node):
         self._last_tick_wall = None
         self._window = _Window(time.perf_counter(), self._engine.t)
         self._tick_timer.reset()
+        self._node_event('resume')
         return f'resumed at t = {self._engine.t:.6f} s'
 
     def step(self) -> TickResult:
@@ -757,6 +902,13 @@ class SimNode(Node):
     # ------------------------------------------------------------------ parameters
 
     def _check_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        if self._resim_active:
+            fixed = [p.name for p in parameters
+                     if p.name in RUN_PARAMETERS or p.name.startswith('feed.')]
+            if fixed:
+                return SetParametersResult(
+                    successful=False, reason=f're-simulating a recording: {", ".join(fixed)} '
+                    'come from the recording until its end')
         values = self._values()
         for param in parameters:
             if param.name in self._specs:
@@ -787,9 +939,10 @@ class SimNode(Node):
             self._last_tick_wall = None
             self._window = _Window(time.perf_counter(), self._engine.t)
         if 'markers.rate' in names:
-            self._marker_rate = float(values['markers.rate'])
+            self._markers.rate = float(values['markers.rate'])
         if 'diagnostics.period' in names:
             self._diag_timer.timer_period_ns = int(round(values['diagnostics.period'] * 1e9))
+        self._node_event('parameters', values={p.name: p.value for p in parameters})
 
     # ------------------------------------------------------------------ the tick
 
@@ -807,6 +960,8 @@ class SimNode(Node):
 
     def _run_tick(self) -> TickResult:
         start = time.perf_counter()
+        if self._resim_active:
+            self._apply_recorded()
         result = self._engine.tick()
         stepped = time.perf_counter()
         self._publish_tick(result)
@@ -829,137 +984,30 @@ class SimNode(Node):
                 f'piece {failure.particle_id} removed at t = {failure.t:.6f} s: '
                 f'{failure.reason} (at {failure.position})')
         if result.reset:
-            self._last_markers_t = -math.inf
+            self._markers.restart()
+        if self._resim_active and self._engine.tick_index >= self._resim.ticks:
+            self._finish_resim()
         return result
 
     def _publish_tick(self, res: TickResult) -> None:
-        stamp = _stamp(res.t)
-        stamp_ns = stamp['sec'] * 1_000_000_000 + stamp['nanosec']
-        header = {'stamp': stamp, 'frame_id': self._frame}
-        n = res.count
+        if res.applied:
+            t0_ns = stamp_ns(res.t0)
+            for item in res.applied:
+                self._publish_event(input_event(res.index, res.t0, item), t0_ns)
+        head = header(res.t, self._frame)
+        t_ns = stamp_ns(res.t)
         if self._pub_clock is not None:
-            self._publish(self._pub_clock, {'clock': stamp}, stamp_ns)
-        poses = np.zeros((n, 7))
-        poses[:, 0:3] = res.positions
-        poses[:, 6] = 1.0
-        self._publish(self._pub_particles, {'header': header, 'poses': poses}, stamp_ns)
-        points = np.zeros(n, dtype=STATE_DTYPE)
-        for i, name in enumerate(('x', 'y', 'z')):
-            points[name] = res.positions[:, i]
-            points['v' + name] = res.velocities[:, i]
-        points['id'] = res.ids & 0xFFFFFFFF
-        points['mass'] = res.masses
-        self._publish(self._pub_states, self._cloud(header, points, STATE_DATATYPES), stamp_ns)
+            self._publish(self._pub_clock, clock_message(res.t), t_ns)
+        self._publish(self._pub_particles, particles_message(head, res.positions), t_ns)
+        self._publish(self._pub_states, states_message(
+            head, res.ids, res.positions, res.velocities, res.masses), t_ns)
         if len(res.exits):
-            ex = res.exits
-            rows = np.zeros(len(ex), dtype=EXIT_DTYPE)
-            for i, name in enumerate(('x', 'y', 'z')):
-                rows[name] = ex.position[:, i]
-                rows['v' + name] = ex.velocity[:, i]
-            rows['exit_time'] = ex.t
-            rows['angle'] = np.arctan2(ex.position[:, 1], ex.position[:, 0])
-            rows['mass'] = ex.mass
-            rows['id'] = ex.ids & 0xFFFFFFFF
-            rows['channel'] = ex.channel
-            self._publish(self._pub_exits, self._cloud(header, rows, EXIT_DATATYPES), stamp_ns)
-        count = res.channel_mass.shape[0]
-        self._publish(self._pub_channel, {
-            'layout': {'dim': [{'label': 'channel', 'size': count, 'stride': count}],
-                       'data_offset': 0},
-            'data': res.channel_mass}, stamp_ns)
-        self._publish(self._pub_cone, {
-            'header': header, 'name': ['cone'], 'position': np.array([res.angle]),
-            'velocity': np.array([res.omega]), 'effort': np.zeros(0)}, stamp_ns)
-        if self._marker_rate > 0.0 and (
-                res.t - self._last_markers_t >= 1.0 / self._marker_rate - 1e-9 * res.t
-                or res.reset):
-            self._last_markers_t = res.t
-            self._publish(self._pub_markers, {'markers': self._static_markers
-                                              + self._dynamic_markers(res, header)}, stamp_ns)
-
-    @staticmethod
-    def _cloud(header: dict[str, Any], points: np.ndarray, datatypes: list[int]
-               ) -> dict[str, Any]:
-        step = points.dtype.itemsize
-        return {'header': header, 'height': 1, 'width': points.shape[0],
-                'fields': point_fields(points.dtype, datatypes), 'is_bigendian': False,
-                'point_step': step, 'row_step': step * points.shape[0], 'data': points,
-                'is_dense': True}
-
-    # ------------------------------------------------------------------ markers
-
-    def _marker(self, ns: str, marker_id: int, marker_type: int, **fields: Any
-                ) -> dict[str, Any]:
-        marker = self._codec.default_message('visualization_msgs/msg/Marker')
-        marker['header'] = {'stamp': {'sec': 0, 'nanosec': 0}, 'frame_id': self._frame}
-        marker['ns'] = ns
-        marker['id'] = marker_id
-        marker['type'] = marker_type
-        marker['pose']['orientation']['w'] = 1.0
-        marker['scale'] = {'x': 1.0, 'y': 1.0, 'z': 1.0}
-        marker['color'] = _color(1.0, 1.0, 1.0)
-        marker.update(fields)
-        return marker
-
-    def _build_static_markers(self) -> list[dict[str, Any]]:
-        """Return the cone surface, the channel sectors and their labels."""
-        model = self._engine.model
-        r, h = model.r, model.h
-        segments = 96
-        angles = np.linspace(0.0, 2.0 * math.pi, segments + 1)
-        tri = np.zeros((segments * 3, 3))
-        tri[0::3] = (0.0, 0.0, h)
-        tri[1::3, 0] = r * np.cos(angles[:-1])
-        tri[1::3, 1] = r * np.sin(angles[:-1])
-        tri[2::3, 0] = r * np.cos(angles[1:])
-        tri[2::3, 1] = r * np.sin(angles[1:])
-        markers = [self._marker('cone', 0, 11, points=tri,  # TRIANGLE_LIST
-                                color=_color(0.7, 0.72, 0.75, 0.8))]
-        channels = model.channels
-        ring = []
-        colors = []
-        labels = []
-        sub = 8
-        for channel in range(1, channels.count + 1):
-            start, end = (math.radians(a) for a in channels.sector_edges(channel))
-            edge = np.linspace(start, end, sub + 1)
-            shade = (0.25, 0.55, 0.85, 0.9) if channel % 2 else (0.95, 0.75, 0.2, 0.9)
-            for a0, a1 in zip(edge[:-1], edge[1:]):
-                inner0 = (r * math.cos(a0), r * math.sin(a0), 0.0)
-                inner1 = (r * math.cos(a1), r * math.sin(a1), 0.0)
-                outer0 = (1.15 * r * math.cos(a0), 1.15 * r * math.sin(a0), 0.0)
-                outer1 = (1.15 * r * math.cos(a1), 1.15 * r * math.sin(a1), 0.0)
-                ring += [inner0, outer0, outer1, inner0, outer1, inner1]
-                colors += [shade] * 6
-            mid = 0.5 * (start + end)
-            labels.append(self._marker(
-                'channel_labels', channel, 9,  # TEXT_VIEW_FACING
-                pose={'position': {'x': 1.25 * r * math.cos(mid), 'y': 1.25 * r * math.sin(mid),
-                                   'z': 0.01},
-                      'orientation': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0}},
-                scale={'x': 0.0, 'y': 0.0, 'z': 0.03}, text=str(channel)))
-        markers.append(self._marker('channels', 0, 11, points=np.array(ring),
-                                    colors=np.array(colors, dtype=np.float32)))
-        return markers + labels
-
-    def _dynamic_markers(self, res: TickResult, header: dict[str, Any]
-                         ) -> list[dict[str, Any]]:
-        """Return the pieces and a line that turns with the cone."""
-        model = self._engine.model
-        c, s = math.cos(res.angle), math.sin(res.angle)
-        line = np.array([[0.0, 0.0, model.h + 0.002], [model.r * c, model.r * s, 0.002]])
-        marker_line = self._marker('cone_angle', 0, 5, header=header,  # LINE_LIST
-                                   points=line, scale={'x': 0.004, 'y': 0.0, 'z': 0.0},
-                                   color=_color(0.1, 0.1, 0.1))
-        size = 2.0 * model.product.s0
-        if res.count:
-            pieces = self._marker('pieces', 0, 7, header=header,  # SPHERE_LIST
-                                  points=res.positions,
-                                  scale={'x': size, 'y': size, 'z': size},
-                                  color=_color(0.85, 0.25, 0.25))
-        else:
-            pieces = self._marker('pieces', 0, 7, header=header, action=2)  # DELETE
-        return [marker_line, pieces]
+            self._publish(self._pub_exits, exits_message(head, res.exits), t_ns)
+        self._publish(self._pub_channel, channel_mass_message(res.channel_mass), t_ns)
+        self._publish(self._pub_cone, cone_state_message(head, res.angle, res.omega), t_ns)
+        if self._markers.due(res.t, res.reset):
+            self._publish(self._pub_markers, self._marker_builder.message(
+                head, res.angle, res.positions), t_ns)
 
     # ------------------------------------------------------------------ diagnostics
 
@@ -1005,21 +1053,25 @@ class SimNode(Node):
             'cone omega (rad/s)': f'{self._engine.omega:.4f}',
             'drive mode': res.mode if res is not None else 'not started',
         }
-        stamp = _stamp(self._engine.t)
         message_dict = {
-            'header': {'stamp': stamp, 'frame_id': ''},
+            'header': {'stamp': stamp(self._engine.t), 'frame_id': ''},
             'status': [{'level': level,
                         'name': f'{self.get_fully_qualified_name()}: simulation',
                         'message': message, 'hardware_id': 'cone_feeder',
                         'values': [{'key': k, 'value': v} for k, v in values.items()]}]}
-        self._publish(self._pub_diag, message_dict, stamp['sec'] * 1_000_000_000
-                      + stamp['nanosec'])
+        self._publish(self._pub_diag, message_dict, self._now_ns())
         if not self._paused:
             self._window = _Window(now, self._engine.t)
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node until shut down; return the process exit status."""
+    """
+    Run the node until shut down; return the process exit status.
+
+    SIGINT and SIGTERM (rclpy's handlers shut the context down) end the spin; the recording
+    is finished in every path by destroy_node(), with both signals blocked meanwhile so that
+    a second Ctrl-C cannot cut the file short.
+    """
     rclpy.init(args=args)
     node = None
     status = 0
@@ -1036,9 +1088,13 @@ def main(args: list[str] | None = None) -> int:
             raise
         # SIGINT/SIGTERM shut the context down while the executor built its wait set
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        try:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     return status
 
 

@@ -79,7 +79,8 @@ def context() -> Iterator[Context]:
 
 def test_controller_drives_the_simulator(context: Context) -> None:
     sim = SimNode(context=context, namespace='/loop', parameter_overrides=[
-        Parameter('real_time_factor', value=0.0), Parameter('feed.rate', value=20.0)])
+        Parameter('real_time_factor', value=0.0), Parameter('feed.rate', value=20.0),
+        Parameter('record_path', value='')])
     ctl = ExampleController(context=context, namespace='/loop', parameter_overrides=[
         Parameter('speed', value=6.0), Parameter('period', value=0.5)])
     executor = SingleThreadedExecutor(context=context)

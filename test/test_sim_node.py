@@ -62,6 +62,7 @@ class Ros:
         return node
 
     def sim(self, namespace: str = '', **params: Any) -> SimNode:
+        params.setdefault('record_path', '')  # no runs/ directory in the working directory
         # an empty list cannot be typed in rclpy; NOT_SET is what `[]` in a YAML file gives
         overrides = [Parameter(k) if v == [] else Parameter(k, value=v)
                      for k, v in params.items()]
@@ -456,7 +457,7 @@ def test_topics_are_relative_and_described_for_recording(ros: Ros) -> None:
     topics = {t.topic: t for t in sim.topics()}
     assert {'/line2/particles', '/line2/particle_states', '/line2/exit_events',
             '/line2/channel_mass', '/line2/cone_state', '/line2/markers', '/diagnostics',
-            '/line2/rotation_cmd', '/line2/spawn'} == set(topics)
+            '/line2/rotation_cmd', '/line2/spawn', '/line2/sim_node/events'} == set(topics)
     assert topics['/line2/exit_events'].qos.depth == 1000
     assert topics['/line2/exit_events'].qos.reliability == 'reliable'
     assert topics['/line2/markers'].qos.durability == 'transient_local'

@@ -1,0 +1,356 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Reading run logs back, also when they are truncated or damaged, without rclpy.
+
+:func:`open_recording` reads what a replay needs to know up front (topics, types, QoS,
+metadata, time range). A complete file is read through its index (messages in log-time
+order, seeking to an offset). A file without summary and footer (the process was killed,
+the disk filled up, the copy was cut short) is read sequentially up to the first record
+that is incomplete or fails its CRC: :attr:`Recording.problem` says why, and everything
+before that point is still delivered. :func:`load_resim_plan` turns a recording of
+``sim_node`` into what re-simulation needs: the recorded parameters and the engine inputs
+by tick index.
+"""
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+import json
+import os
+from pathlib import Path
+from typing import Any, BinaryIO
+
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Footer, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+import yaml
+
+from .cdr import CdrError, default_codec
+from .errors import ConeFeederError
+from .recording import _READ_ERRORS, QosProfile, RecordingError
+from .runlog import END_METADATA_NAME, FORMAT_VERSION, METADATA_NAME
+
+__all__ = [
+    'RecordedMessage',
+    'RecordedTopic',
+    'Recording',
+    'ResimPlan',
+    'load_resim_plan',
+    'open_recording',
+    'qos_from_metadata',
+]
+
+
+@dataclass(frozen=True)
+class RecordedTopic:
+    """A channel of a recording: topic, ROS type, offered QoS text and message count."""
+
+    topic: str
+    type_name: str
+    offered_qos: str
+    message_count: int
+
+
+@dataclass(frozen=True)
+class RecordedMessage:
+    """One recorded message: topic, type, log time (ns) and the serialized CDR bytes."""
+
+    topic: str
+    type_name: str
+    log_time_ns: int
+    data: bytes
+
+
+def qos_from_metadata(text: str) -> QosProfile | None:
+    """
+    Return the first profile of an ``offered_qos_profiles`` YAML text, None if unusable.
+
+    Only history, depth, reliability and durability are taken (what a republisher needs).
+    """
+    try:
+        profiles = yaml.safe_load(text) if text else None
+    except yaml.YAMLError:
+        return None
+    if not isinstance(profiles, list) or not profiles or not isinstance(profiles[0], dict):
+        return None
+    first = profiles[0]
+    fields: dict[str, Any] = {}
+    for key in ('history', 'reliability', 'durability'):
+        if isinstance(first.get(key), str):
+            fields[key] = first[key]
+    if isinstance(first.get('depth'), int) and not isinstance(first.get('depth'), bool):
+        fields['depth'] = first['depth']
+    try:
+        return QosProfile(**fields)
+    except ConeFeederError:
+        return None
+
+
+def _open(path: Path) -> BinaryIO:
+    try:
+        return open(path, 'rb')
+    except OSError as err:
+        raise RecordingError(f'cannot open the recording {str(path)!r}: '
+                             f'{err.strerror or err}') from err
+
+
+def _type_name(schema: Schema | None) -> str:
+    return schema.name if schema is not None else ''
+
+
+@dataclass
+class Recording:
+    """
+    What is known about a recording before its messages are read.
+
+    complete: the file has its summary and footer (it was closed properly); problem: why
+    it is incomplete or where reading failed (None while everything read fine); start_ns,
+    end_ns: log times of the first and last readable message (None when there is none).
+    """
+
+    path: Path
+    complete: bool
+    topics: dict[str, RecordedTopic]
+    metadata: dict[str, dict[str, str]]
+    start_ns: int | None
+    end_ns: int | None
+    message_count: int
+    problem: str | None = None
+    _channels: dict[int, tuple[str, str]] = field(default_factory=dict, repr=False)
+
+    def messages(self, topics: set[str] | None = None, start_ns: int | None = None,
+                 end_ns: int | None = None) -> Iterator[RecordedMessage]:
+        """
+        Yield the messages of ``topics`` (None: all) with start_ns <= log time <= end_ns.
+
+        Complete files: in log-time order. Incomplete files: in file order, up to the
+        first unreadable record. A read error ends the iteration and sets :attr:`problem`.
+        """
+        if self.complete:
+            yield from self._indexed(topics, start_ns, end_ns)
+        else:
+            yield from self._sequential(topics, start_ns, end_ns)
+
+    def _indexed(self, topics: set[str] | None, start_ns: int | None, end_ns: int | None
+                 ) -> Iterator[RecordedMessage]:
+        with _open(self.path) as stream:
+            reader = SeekingReader(stream, validate_crcs=True)
+            messages = reader.iter_messages(
+                topics=None if topics is None else sorted(topics), starting_at=start_ns,
+                ending_at=end_ns, log_time_order=True)
+            while True:
+                try:
+                    schema, channel, message = next(messages)
+                except StopIteration:
+                    return
+                except _READ_ERRORS as err:
+                    self.problem = f'damaged data after the messages read so far: {err!r}'
+                    return
+                yield RecordedMessage(channel.topic, _type_name(schema), message.log_time,
+                                      message.data)
+
+    def _sequential(self, topics: set[str] | None, start_ns: int | None,
+                    end_ns: int | None) -> Iterator[RecordedMessage]:
+        with _open(self.path) as stream:
+            records = StreamReader(stream, validate_crcs=True).records
+            channels: dict[int, tuple[str, str]] = {}
+            schemas: dict[int, str] = {}
+            while True:
+                try:
+                    record = next(records)
+                except StopIteration:
+                    return
+                except _READ_ERRORS:
+                    return  # the end of the readable part (the problem is known already)
+                if isinstance(record, Schema):
+                    schemas[record.id] = record.name
+                elif isinstance(record, Channel):
+                    channels[record.id] = (record.topic, schemas.get(record.schema_id, ''))
+                elif isinstance(record, Message) and record.channel_id in channels:
+                    topic, type_name = channels[record.channel_id]
+                    if topics is not None and topic not in topics:
+                        continue
+                    if start_ns is not None and record.log_time < start_ns:
+                        continue
+                    if end_ns is not None and record.log_time > end_ns:
+                        continue
+                    yield RecordedMessage(topic, type_name, record.log_time, record.data)
+
+
+def _read_complete(path: Path) -> Recording | None:
+    """Return the recording read through its summary, None when there is no usable one."""
+    with _open(path) as stream:
+        try:
+            reader = SeekingReader(stream, validate_crcs=True)
+            summary = reader.get_summary()
+            if summary is None or summary.statistics is None or not summary.chunk_indexes:
+                return None
+            metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        except _READ_ERRORS:
+            return None
+    stats = summary.statistics
+    channels = {}
+    topics = {}
+    for channel in summary.channels.values():
+        type_name = _type_name(summary.schemas.get(channel.schema_id))
+        channels[channel.id] = (channel.topic, type_name)
+        count = stats.channel_message_counts.get(channel.id, 0)
+        known = topics.get(channel.topic)
+        topics[channel.topic] = RecordedTopic(
+            channel.topic, type_name, channel.metadata.get('offered_qos_profiles', ''),
+            count + (known.message_count if known is not None else 0))
+    count = stats.message_count
+    return Recording(path, True, topics, metadata,
+                     stats.message_start_time if count else None,
+                     stats.message_end_time if count else None, count, None, channels)
+
+
+def _scan(path: Path) -> Recording:
+    """Read an incomplete file sequentially up to its first unreadable record."""
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, str]] = {}
+    qos: dict[str, str] = {}
+    counts: dict[str, int] = {}
+    metadata: dict[str, dict[str, str]] = {}
+    start = end = None
+    total = 0
+    problem = None
+    footer = False
+    with _open(path) as stream:
+        records = StreamReader(stream, validate_crcs=True).records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                break
+            except _READ_ERRORS as err:
+                problem = f'{err!r}'
+                break
+            if isinstance(record, Schema):
+                schemas[record.id] = record.name
+            elif isinstance(record, Channel):
+                channels[record.id] = (record.topic, schemas.get(record.schema_id, ''))
+                qos.setdefault(record.topic, record.metadata.get('offered_qos_profiles', ''))
+                counts.setdefault(record.topic, 0)
+            elif isinstance(record, Metadata):
+                metadata[record.name] = dict(record.metadata)
+            elif isinstance(record, Message) and record.channel_id in channels:
+                topic = channels[record.channel_id][0]
+                counts[topic] += 1
+                total += 1
+                start = record.log_time if start is None else min(start, record.log_time)
+                end = record.log_time if end is None else max(end, record.log_time)
+            elif isinstance(record, Footer):
+                footer = True
+    if total == 0 and not channels and problem is not None:
+        raise RecordingError(f'{str(path)!r} is not a readable MCAP file: {problem}')
+    if problem is None:
+        problem = ('no summary (the writer did not finish the file)' if footer else
+                   'the file ends early (no footer: the writer did not finish it)')
+    else:
+        problem = f'damaged or truncated: reading stopped at {problem}'
+    topics = {topic: RecordedTopic(topic, type_name, qos.get(topic, ''), counts.get(topic, 0))
+              for topic, type_name in channels.values()}
+    return Recording(path, False, topics, metadata, start, end, total, problem, channels)
+
+
+def open_recording(path: str | os.PathLike) -> Recording:
+    """
+    Open a recording: through its index when complete, else its readable beginning.
+
+    Raises RecordingError when the file cannot be opened or does not start as MCAP.
+    """
+    path = Path(path)
+    with _open(path) as stream:
+        magic = stream.read(8)
+    if magic != b'\x89MCAP0\r\n':
+        raise RecordingError(f'{str(path)!r} is not an MCAP file (wrong magic bytes)')
+    recording = _read_complete(path)
+    return recording if recording is not None else _scan(path)
+
+
+# --------------------------------------------------------------------------- re-simulation
+
+
+@dataclass(frozen=True)
+class ResimPlan:
+    """
+    What re-simulating a sim_node recording needs.
+
+    parameters: the recorded parameter values (typed); engine_config: the recorded JSON of
+    the engine configuration (for a consistency check); events: recorded ``~/events``
+    by tick index, in order; ticks: the number of ticks the recorded run made (re-simulation
+    stops there); problem: why the recording is incomplete (None if complete).
+    """
+
+    path: Path
+    parameters: dict[str, Any]
+    engine_config: str
+    events: dict[int, list[dict[str, Any]]]
+    ticks: int
+    problem: str | None
+
+
+def load_resim_plan(path: str | os.PathLike) -> ResimPlan:
+    """Read a sim_node recording for re-simulation; raise RecordingError if it cannot be."""
+    recording = open_recording(path)
+    meta = recording.metadata.get(METADATA_NAME)
+    where = str(recording.path)
+    if meta is None or 'parameters_json' not in meta:
+        raise RecordingError(f'{where!r} has no {METADATA_NAME!r} metadata with parameters: '
+                             'not a recording of sim_node')
+    if meta.get('source') != 'sim_node':
+        raise RecordingError(f'{where!r} was written by {meta.get("source")!r}, not sim_node: '
+                             'only sim_node recordings can be re-simulated')
+    if meta.get('format') != FORMAT_VERSION:
+        raise RecordingError(f'{where!r} has format {meta.get("format")!r}; this version '
+                             f'reads format {FORMAT_VERSION}')
+    try:
+        parameters = json.loads(meta['parameters_json'])
+        topics = json.loads(meta['topics'])
+        dt_ns = 1e9 / float(parameters['update_rate'])
+    except (KeyError, TypeError, ValueError) as err:
+        raise RecordingError(f'{where!r}: unreadable {METADATA_NAME} metadata: {err!r}') from err
+    events_topic = topics.get('~/events')
+    states_topic = topics.get('particle_states')
+    end = recording.metadata.get(END_METADATA_NAME, {})
+    ticks = None
+    if 'ticks' in end:
+        ticks = int(end['ticks'])
+    events: dict[int, list[dict[str, Any]]] = {}
+    last_state = None
+    for message in recording.messages({t for t in (events_topic, states_topic) if t}):
+        if message.topic == states_topic:
+            last_state = message.log_time_ns
+            continue
+        event = _event(message, where)
+        events.setdefault(int(event['tick']), []).append(event)
+    if ticks is None:
+        ticks = 0 if last_state is None else int(round(last_state / dt_ns))
+    events = {k: v for k, v in events.items() if k < ticks}
+    return ResimPlan(recording.path, parameters, meta.get('engine_config', ''), events, ticks,
+                     recording.problem)
+
+
+def _event(message: RecordedMessage, where: str) -> dict[str, Any]:
+    try:
+        text = default_codec().decode('std_msgs/msg/String', message.data)['data']
+        event = json.loads(text)
+        if not isinstance(event, dict) or not isinstance(event.get('tick'), int):
+            raise ValueError('not an event object with a tick')
+    except (CdrError, ValueError) as err:
+        raise RecordingError(f'{where!r}: unreadable event at log time '
+                             f'{message.log_time_ns} ns: {err!r}') from err
+    return event
