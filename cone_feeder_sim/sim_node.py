@@ -871,7 +871,6 @@ class SimNode(Node):
             response.success = False
             response.message = 'not paused: call ~/pause with data: true first'
             return response
-        self._node_event('step')
         result = self.step()
         response.success = True
         response.message = f'stepped to t = {result.t:.6f} s ({result.count} pieces)'
@@ -897,6 +896,7 @@ class SimNode(Node):
 
     def step(self) -> TickResult:
         """Run one tick now and publish it (what ~/step does while paused)."""
+        self._node_event('step')
         return self._run_tick()
 
     # ------------------------------------------------------------------ parameters

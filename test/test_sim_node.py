@@ -126,6 +126,9 @@ def test_defaults_are_the_default_config_file(ros: Ros) -> None:
     content = yaml.safe_load(CONFIG.read_text())
     params = flatten(content['/**/sim_node']['ros__parameters'])
     assert len(params) > 20
+    # the harness turns recording off; the file has the built-in default
+    defaults = {spec.name: spec.default for spec in parameter_specs()}
+    assert params.pop('record_path') == defaults['record_path']
     for name, value in params.items():
         actual = sim.get_parameter(name).value
         if isinstance(value, list):
