@@ -32,6 +32,7 @@ from typing import TextIO
 from . import __version__
 from .errors import ConeFeederError
 from .events_io import write_events_csv
+from .runlog import ScenarioRecorder
 from .runner import run_scenario
 from .scenario import load_scenario, Scenario
 from .simulation import Simulator, StepResult
@@ -93,6 +94,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument('scenario', help='scenario YAML file')
     run.add_argument('--events', required=True, help='CSV file for the exit events')
     run.add_argument('--quiet', action='store_true', help='no progress bar')
+    run.add_argument('--mcap', metavar='OUT.mcap',
+                     help='also record the run to an MCAP file (the topics of sim_node)')
     report = sub.add_parser(
         'report', help='draw a one-page PNG report of a recorded run (MCAP file)')
     report.add_argument('mcap', help='MCAP file of a run (sim_node or the headless runner)')
@@ -110,8 +113,19 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
     """Run a scenario; return the exit code."""
     scenario: Scenario = load_scenario(args.scenario)
     check_writable(args.events)
-    progress = None if args.quiet else ProgressBar(scenario.duration, err)
-    result = run_scenario(scenario, progress)
+    bar = None if args.quiet else ProgressBar(scenario.duration, err)
+    recorder = ScenarioRecorder(args.mcap, scenario, args.scenario) if args.mcap else None
+    try:
+        callbacks = [c for c in (recorder, bar) if c is not None]
+
+        def progress(t: float, sim: Simulator, step: StepResult) -> None:
+            for callback in callbacks:
+                callback(t, sim, step)
+
+        result = run_scenario(scenario, progress if callbacks else None)
+    finally:
+        if recorder is not None:
+            recorder.close()
     rows = write_events_csv(args.events, result.exit_table())
     for failure in result.failures:
         err.write(f'warning: particle {failure.particle_id} removed at t={failure.t:.6f} s: '
@@ -119,6 +133,8 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
     err.write(f'{rows} of {len(scenario.particles)} pieces left the cone; '
               f'{result.remaining_ids.size} still on it, {len(result.failures)} failed; '
               f'events written to {args.events}\n')
+    if recorder is not None:
+        err.write(f'run recorded to {args.mcap}\n')
     return 0
 
 
