@@ -44,6 +44,7 @@ setup(
         'console_scripts': [
             'cone-feeder-sim = cone_feeder_sim.cli:main',
             'sim_node = cone_feeder_sim.sim_node:main',
+            'replay_node = cone_feeder_sim.replay_node:main',
             'example_controller = cone_feeder_sim.example_controller:main',
         ],
     },
