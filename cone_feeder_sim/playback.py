@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import json
 import os
 from pathlib import Path
+import struct
 from typing import Any, BinaryIO
 
 from mcap.reader import SeekingReader
@@ -129,6 +130,8 @@ class Recording:
     message_count: int
     problem: str | None = None
     _channels: dict[int, tuple[str, str]] = field(default_factory=dict, repr=False)
+    #: Log time from which a complete file's data are damaged (None: intact as far as known).
+    _damaged_from_ns: int | None = field(default=None, repr=False)
 
     def messages(self, topics: set[str] | None = None, start_ns: int | None = None,
                  end_ns: int | None = None) -> Iterator[RecordedMessage]:
@@ -145,6 +148,11 @@ class Recording:
 
     def _indexed(self, topics: set[str] | None, start_ns: int | None, end_ns: int | None
                  ) -> Iterator[RecordedMessage]:
+        if self._damaged_from_ns is not None:
+            end_ns = (self._damaged_from_ns - 1 if end_ns is None
+                      else min(end_ns, self._damaged_from_ns - 1))
+            if start_ns is not None and start_ns > end_ns:
+                return
         with _open(self.path) as stream:
             reader = SeekingReader(stream, validate_crcs=True)
             messages = reader.iter_messages(
@@ -198,8 +206,9 @@ def _read_complete(path: Path) -> Recording | None:
             if summary is None or summary.statistics is None or not summary.chunk_indexes:
                 return None
             metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        except _READ_ERRORS:
+        except (*_READ_ERRORS, OSError):  # OSError: seeking before the start of a short file
             return None
+        damaged = _first_damaged_chunk(stream, summary.chunk_indexes)
     stats = summary.statistics
     channels = {}
     topics = {}
@@ -212,9 +221,52 @@ def _read_complete(path: Path) -> Recording | None:
             channel.topic, type_name, channel.metadata.get('offered_qos_profiles', ''),
             count + (known.message_count if known is not None else 0))
     count = stats.message_count
-    return Recording(path, True, topics, metadata,
-                     stats.message_start_time if count else None,
-                     stats.message_end_time if count else None, count, None, channels)
+    start = stats.message_start_time if count else None
+    end = stats.message_end_time if count else None
+    problem = None
+    damaged_from = None
+    if damaged is not None:
+        index, reason = damaged
+        damaged_from = index.message_start_time
+        before = [c.message_end_time for c in summary.chunk_indexes
+                  if c.message_end_time < damaged_from]
+        end = max(before) if before else None
+        start = start if end is not None else None
+        problem = (f'damaged chunk at byte {index.chunk_start_offset} ({reason}): messages '
+                   f'from log time {damaged_from} ns on are not read')
+    return Recording(path, True, topics, metadata, start, end, count, problem, channels,
+                     damaged_from)
+
+
+def _first_damaged_chunk(stream: BinaryIO, indexes: list[Any]) -> tuple[Any, str] | None:
+    """
+    Return the first chunk (by log time) whose record does not match its index, and why.
+
+    Only the chunk headers are read (a few bytes each). Damage inside the compressed data
+    shows when the chunk is decompressed (its CRC or the decompressor fails).
+    """
+    damaged = []
+    for index in indexes:
+        stream.seek(index.chunk_start_offset)
+        head = stream.read(1 + 8 + 8 + 8 + 8 + 4 + 4)
+        reason = None
+        if len(head) < 41:
+            reason = 'cut short'
+        else:
+            opcode, length, start, end, size, _crc, name_length = struct.unpack('<BQQQQII', head)
+            name = stream.read(name_length) if name_length < 64 else b''
+            if opcode != 0x06 or length != index.chunk_length - 9:
+                reason = 'not a chunk record where the index points'
+            elif (start, end, size) != (index.message_start_time, index.message_end_time,
+                                         index.uncompressed_size):
+                reason = 'its times or size differ from the index'
+            elif name != index.compression.encode():
+                reason = 'its compression differs from the index'
+        if reason is not None:
+            damaged.append((index, reason))
+    if not damaged:
+        return None
+    return min(damaged, key=lambda item: item[0].message_start_time)
 
 
 def _scan(path: Path) -> Recording:
@@ -236,7 +288,8 @@ def _scan(path: Path) -> Recording:
             except StopIteration:
                 break
             except _READ_ERRORS as err:
-                problem = f'{err!r}'
+                problem = (f'at byte {stream.tell()} of {path.stat().st_size}: '
+                           f'{str(err) or type(err).__name__}')
                 break
             if isinstance(record, Schema):
                 schemas[record.id] = record.name
@@ -257,10 +310,11 @@ def _scan(path: Path) -> Recording:
     if total == 0 and not channels and problem is not None:
         raise RecordingError(f'{str(path)!r} is not a readable MCAP file: {problem}')
     if problem is None:
-        problem = ('no summary (the writer did not finish the file)' if footer else
-                   'the file ends early (no footer: the writer did not finish it)')
+        problem = ('no summary: the writer did not finish the file' if footer else
+                   'no footer: the file ends early, the writer did not finish it')
     else:
-        problem = f'damaged or truncated: reading stopped at {problem}'
+        problem = ('the file was not finished (truncated, or the writer was killed) or is '
+                   f'damaged: reading stopped {problem}')
     topics = {topic: RecordedTopic(topic, type_name, qos.get(topic, ''), counts.get(topic, 0))
               for topic, type_name in channels.values()}
     return Recording(path, False, topics, metadata, start, end, total, problem, channels)

@@ -56,7 +56,7 @@ from .messages import (
     states_message, TOPICS)
 from .params import (
     CHANNEL_KEYS, MODEL_KEYS, ModelParams, P_M, PRODUCT_LIMITS, ProductParams, SolverParams)
-from .recording import McapRecorder, QosProfile, RecordingError
+from .recording import DEFAULT_CHUNK_SIZE, McapRecorder, QosProfile, RecordingError
 from .scenario import Scenario
 from .simulation import Simulator, StepResult
 
@@ -265,12 +265,13 @@ class RunRecorder:
     def __init__(self, path: str | os.PathLike, topics: Iterable[tuple[str, str, QosProfile]],
                  metadata: Mapping[str, Mapping[str, str]], *,
                  flush_interval_s: float = FLUSH_INTERVAL_S, compression: str = 'zstd',
+                 chunk_size: int = DEFAULT_CHUNK_SIZE,
                  max_backlog_bytes: int = MAX_BACKLOG_BYTES) -> None:
         """Create the file (and missing directories), write schemas, channels, metadata."""
         path = Path(path)
         _make_parent(path)
         self._recorder = McapRecorder(path, flush_interval_s=flush_interval_s,
-                                      compression=compression)
+                                      compression=compression, chunk_size=chunk_size)
         try:
             for topic, type_name, qos in topics:
                 self._recorder.add_topic(topic, type_name, qos)
@@ -317,6 +318,7 @@ class RunRecorder:
             if self._closed or self._error is not None:
                 return
             while self._backlog > self._max_backlog and self._error is None:
+                self._cond.notify_all()  # the writer sleeps between polls: wake it now
                 self._cond.wait(_POLL_S)
             self._queue.append((topic, type_name, data, log_time_ns))
             self._backlog += len(data)
@@ -364,7 +366,8 @@ class RunRecorder:
         self._thread.join()
         try:
             if end_metadata is not None and self._error is None:
-                self._recorder.add_metadata(END_METADATA_NAME, dict(end_metadata))
+                self._recorder.add_metadata(END_METADATA_NAME, {
+                    **end_metadata, 'messages': str(self._written)})
         finally:
             self._recorder.close()
 
