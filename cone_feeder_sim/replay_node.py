@@ -161,6 +161,9 @@ class ReplayNode(Node):
         if not recording.complete:
             log.warning(f'{path} is incomplete or damaged ({recording.problem}); replaying its '
                         f'readable part: {recording.message_count} messages')
+        elif recording.problem:
+            log.warning(f'{path} is damaged ({recording.problem}); replaying what comes before')
+        self._problem = recording.problem
         if recording.start_ns is None or recording.end_ns is None:
             raise ConeFeederError(f'{path} has no readable message to replay')
         first = recording.start_ns
@@ -256,9 +259,10 @@ class ReplayNode(Node):
             count += 1
             self._next = next(self._iter, None)
         if self._next is None:
-            if self._recording.problem and self._recording.complete:
+            if self._recording.problem != self._problem:
+                self._problem = self._recording.problem
                 self.get_logger().error(f'reading {self._recording.path} failed: '
-                                        f'{self._recording.problem}; replayed what came before')
+                                        f'{self._problem}; replayed what came before')
             if self._loop and self.published:
                 self._begin_pass()
             else:

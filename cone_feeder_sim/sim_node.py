@@ -187,7 +187,7 @@ COMMAND_QOS = _rclpy_qos(messages.COMMAND_QOS)
 #: Parameters that re-simulation does not take from the recording (wall-clock pacing,
 #: start state of the timer, the outputs of this run).
 LIVE_PARAMETERS = ('real_time_factor', 'start_paused', 'diagnostics.period', 'record_path',
-                   'replay_commands')
+                   'record_compression', 'replay_commands')
 #: Run-time parameters that change what the simulation does (refused while re-simulating).
 RUN_PARAMETERS = ('max_angular_velocity', 'max_angular_acceleration', 'cmd_timeout',
                   'open_loop_pattern', 'markers.rate')
@@ -358,6 +358,9 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
                   'topic, every received command, the applied inputs, the parameters); '
                   'strftime fields are filled in (an existing file gets _2, _3, ...); '
                   'missing directories are created; empty: no recording'),
+        ParamSpec('record_compression', 'zstd', 'chunk compression of the recording: zstd '
+                  '(smallest files), lz4 (least CPU) or none',
+                  constraints='zstd, lz4 or none'),
         ParamSpec('replay_commands', '', 'MCAP file of an earlier sim_node run to re-simulate: '
                   'its parameters, initial state and applied inputs (at the same ticks) drive '
                   'this run, live inputs are refused until its last tick, then the node '
@@ -581,7 +584,12 @@ class SimNode(Node):
             return
         path = expand_record_path(template).absolute()
         topics = [(info.topic, info.type_name, info.qos) for info in self._topics.values()]
-        self._recorder = RunRecorder(path, topics, {METADATA_NAME: self._metadata(values)})
+        compression = str(values['record_compression'])
+        if compression not in ('zstd', 'lz4', 'none'):
+            raise ParameterError(f'record_compression must be zstd, lz4 or none, got '
+                                 f'{compression!r}')
+        self._recorder = RunRecorder(path, topics, {METADATA_NAME: self._metadata(values)},
+                                     compression=compression)
         self.add_message_hook(self._recorder.hook)
         self.get_logger().info(f'recording to {path}')
 
