@@ -48,6 +48,7 @@ cone_state         sensor_msgs/JointState              reliable, keep last 10, v
 markers            visualization_msgs/MarkerArray      reliable, keep last 1, transient local
 /diagnostics       diagnostic_msgs/DiagnosticArray     reliable, keep last 10, volatile
 /clock             rosgraph_msgs/Clock                 reliable, keep last 1, volatile
+~/events           std_msgs/String (JSON)              reliable, keep last 1000, volatile
 =================  ==================================  ======================================
 
 State topics are reliable (a reliable writer matches both reliable and best-effort readers,
@@ -83,6 +84,12 @@ frame and initial pieces are read-only; the drive (limits, timeout, pattern), th
 real-time factor, the marker rate and the diagnostics period can be changed at run time;
 invalid values are refused with the reason. Double parameters need a decimal point in
 parameter files (``2.0``, not ``2``); an empty array (``[]``) means "none".
+
+Recording (``record_path``, see ``doc/recording.md``): every published and received
+message goes to one MCAP file (log time = simulation time) through a writer thread; the
+inputs the engine applied are published on ``~/events`` with their tick index, so that
+``replay_commands`` can re-simulate the run exactly. ``main()`` finishes the file on a
+normal end, SIGINT and SIGTERM.
 """
 
 from collections.abc import Callable
