@@ -257,8 +257,8 @@ def _first_damaged_chunk(stream: BinaryIO, indexes: list[Any]) -> tuple[Any, str
             name = stream.read(name_length) if name_length < 64 else b''
             if opcode != 0x06 or length != index.chunk_length - 9:
                 reason = 'not a chunk record where the index points'
-            elif (start, end, size) != (index.message_start_time, index.message_end_time,
-                                         index.uncompressed_size):
+            elif (start, end, size) != (
+                    index.message_start_time, index.message_end_time, index.uncompressed_size):
                 reason = 'its times or size differ from the index'
             elif name != index.compression.encode():
                 reason = 'its compression differs from the index'

@@ -474,4 +474,3 @@ class ScenarioRecorder:
                 'messages': str(self._recorder.message_count)})
         finally:
             self._recorder.close()
-

@@ -62,7 +62,7 @@ def inputs() -> list[Any]:
     return [
         RotationCommand(-7.123456789012345),
         SpawnRequest(np.array([[0.05, 0.01, 0.06], [-0.07, 0.02, 0.05]]),
-                      np.array([[0.0, 0.1, 0.0], [0.0, 0.0, 0.0]]), (product, product)),
+                     np.array([[0.0, 0.1, 0.0], [0.0, 0.0, 0.0]]), (product, product)),
         SpawnRequest(np.array([[0.1 / 3.0, -0.02, 0.07]])),
         Reconfigure(drive=DriveParams(cmd_timeout=0.0, pattern=((0.3, 4.0), (0.1, -2.5))),
                     feed=FeedParams(rate=30.0, d_values=(30.0, 750.0), mass_rel_std=0.1)),
