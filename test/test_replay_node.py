@@ -31,6 +31,7 @@ import time
 from typing import Any
 
 from cone_feeder_sim.cli import main as cli_main
+from cone_feeder_sim.errors import ConeFeederError
 from cone_feeder_sim.recording import McapRecorder
 from cone_feeder_sim.replay_node import ReplayNode
 from diagnostic_msgs.msg import DiagnosticArray
@@ -161,6 +162,18 @@ def test_offsets_inputs_and_clock(ros: Ros, tmp_path: Path) -> None:
     expected = sorted([FIRST_NS + i * STEP_NS for i in range(10, 31)]
                       + [FIRST_NS + 15 * STEP_NS + 1])
     assert stamps == expected
+
+
+def test_topics_selects_what_is_replayed(ros: Ros, tmp_path: Path) -> None:
+    path = synthetic(tmp_path / 'counter.mcap')
+    counter = ros.listen(Float64, '/counter')
+    commands = ros.listen(Float64, '/rotation_cmd')
+    node = ros.replay(path=str(path), rate=10.0, delay=0.5, topics=['/rotation_cmd'])
+    assert ros.spin_until(lambda: node.done.done(), 30.0)
+    ros.spin_until(lambda: bool(commands), 5.0)
+    assert values(commands) == [2.5] and counter == []
+    with pytest.raises(ConeFeederError, match=r"topics \['/nothing'\] are not in the recording"):
+        ros.replay(path=str(path), topics=['/nothing'])
 
 
 def test_loop_and_progress_reports(ros: Ros, tmp_path: Path) -> None:
