@@ -385,7 +385,8 @@ def load_resim_plan(path: str | os.PathLike) -> ResimPlan:
         ticks = int(end['ticks'])
     events: dict[int, list[dict[str, Any]]] = {}
     last_state = None
-    for message in recording.messages({t for t in (events_topic, states_topic) if t}):
+    wanted = {events_topic} if ticks is not None else {events_topic, states_topic}
+    for message in recording.messages({t for t in wanted if t}):
         if message.topic == states_topic:
             last_state = message.log_time_ns
             continue
