@@ -20,7 +20,9 @@ metadata, time range). A complete file is read through its index (messages in lo
 order, seeking to an offset). A file without summary and footer (the process was killed,
 the disk filled up, the copy was cut short) is read sequentially up to the first record
 that is incomplete or fails its CRC: :attr:`Recording.problem` says why, and everything
-before that point is still delivered. :func:`load_resim_plan` turns a recording of
+before that point is still delivered. :class:`RecordStream` is that sequential reading on
+its own (the records of a stream in file order, up to the first unreadable one), for
+readers that want the records themselves. :func:`load_resim_plan` turns a recording of
 ``sim_node`` into what re-simulation needs: the recorded parameters and the engine inputs
 by tick index.
 """
@@ -34,7 +36,7 @@ import struct
 from typing import Any, BinaryIO
 
 from mcap.reader import SeekingReader
-from mcap.records import Channel, Footer, Message, Metadata, Schema
+from mcap.records import Channel, Footer, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 import yaml
 
@@ -47,6 +49,7 @@ __all__ = [
     'RecordedMessage',
     'RecordedTopic',
     'Recording',
+    'RecordStream',
     'ResimPlan',
     'load_resim_plan',
     'open_recording',
@@ -111,6 +114,34 @@ def _type_name(schema: Schema | None) -> str:
     return schema.name if schema is not None else ''
 
 
+class RecordStream:
+    """
+    The records of an MCAP stream in file order, up to the first unreadable one.
+
+    Iterating reads from the stream's current position (the magic bytes first) with CRCs
+    checked, and stops at the end of the file or at the first record that is incomplete or
+    damaged: :attr:`error` is then what reading it raised (None while none was raised).
+    The stream's position is where reading stopped.
+    """
+
+    def __init__(self, stream: BinaryIO) -> None:
+        """Read ``stream`` (open in binary mode) when iterated."""
+        self.error: BaseException | None = None
+        self._records = StreamReader(stream, validate_crcs=True).records
+
+    def __iter__(self) -> Iterator[McapRecord]:
+        """Yield the records; a read error ends the iteration and sets :attr:`error`."""
+        while True:
+            try:
+                record = next(self._records)
+            except StopIteration:
+                return
+            except _READ_ERRORS as err:
+                self.error = err
+                return
+            yield record
+
+
 @dataclass
 class Recording:
     """
@@ -172,16 +203,10 @@ class Recording:
     def _sequential(self, topics: set[str] | None, start_ns: int | None,
                     end_ns: int | None) -> Iterator[RecordedMessage]:
         with _open(self.path) as stream:
-            records = StreamReader(stream, validate_crcs=True).records
             channels: dict[int, tuple[str, str]] = {}
             schemas: dict[int, str] = {}
-            while True:
-                try:
-                    record = next(records)
-                except StopIteration:
-                    return
-                except _READ_ERRORS:
-                    return  # the end of the readable part (the problem is known already)
+            # up to the end of the readable part (the problem is known already)
+            for record in RecordStream(stream):
                 if isinstance(record, Schema):
                     schemas[record.id] = record.name
                 elif isinstance(record, Channel):
@@ -281,16 +306,8 @@ def _scan(path: Path) -> Recording:
     problem = None
     footer = False
     with _open(path) as stream:
-        records = StreamReader(stream, validate_crcs=True).records
-        while True:
-            try:
-                record = next(records)
-            except StopIteration:
-                break
-            except _READ_ERRORS as err:
-                problem = (f'at byte {stream.tell()} of {path.stat().st_size}: '
-                           f'{str(err) or type(err).__name__}')
-                break
+        records = RecordStream(stream)
+        for record in records:
             if isinstance(record, Schema):
                 schemas[record.id] = record.name
             elif isinstance(record, Channel):
@@ -307,6 +324,10 @@ def _scan(path: Path) -> Recording:
                 end = record.log_time if end is None else max(end, record.log_time)
             elif isinstance(record, Footer):
                 footer = True
+        if records.error is not None:
+            err = records.error
+            problem = (f'at byte {stream.tell()} of {path.stat().st_size}: '
+                       f'{str(err) or type(err).__name__}')
     if total == 0 and not channels and problem is not None:
         raise RecordingError(f'{str(path)!r} is not a readable MCAP file: {problem}')
     if problem is None:

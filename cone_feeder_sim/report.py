@@ -16,8 +16,9 @@
 One-page PNG report of a recorded run (``cone-feeder-sim report run.mcap``).
 
 Reading and drawing are separate steps. :func:`read_run` streams an MCAP file
-(ROS 2 profile, CDR messages) with mcap's non-seeking reader, so a file cut
-off by a crash still yields everything before the damage, and turns the
+(ROS 2 profile, CDR messages) with :class:`~cone_feeder_sim.playback.RecordStream`
+(mcap's non-seeking reader), so a file cut off by a crash still yields
+everything before the damage, and turns the
 topics ``particle_states``, ``exit_events``, ``cone_state`` and
 ``channel_mass`` (matched by the last part of the topic name and by type)
 into numpy arrays in a :class:`RunData`. PointCloud2 ``data`` is read with
@@ -52,9 +53,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Wedge
-from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.exceptions import EndOfFile, InvalidMagic
 from mcap.records import Channel, Header, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 import numpy as np
 import yaml
 
@@ -67,11 +67,7 @@ from .msgdefs import (
     SEPARATOR,
 )
 from .params import ChannelLayout, model_params_from_mapping, ModelParams
-
-try:  # zstandard is optional for mcap; only needed to recognise its errors here.
-    import zstandard
-except ImportError:  # pragma: no cover - installed with mcap's zstd support
-    zstandard = None
+from .playback import RecordStream
 
 __all__ = [
     'DEFAULT_MAX_TRAJECTORIES',
@@ -115,11 +111,6 @@ TOPIC_TYPES = {
 
 #: sensor_msgs/PointField datatypes -> numpy type codes (without byte order).
 POINT_FIELD_TYPES = {1: 'i1', 2: 'u1', 3: 'i2', 4: 'u2', 5: 'i4', 6: 'u4', 7: 'f4', 8: 'f8'}
-
-#: What reading a truncated or corrupt record can raise (EndOfFile is an McapError).
-_READ_ERRORS: tuple[type[BaseException], ...] = (
-    McapError, EOFError, ValueError, RuntimeError, struct.error, KeyError, IndexError) + (
-    (zstandard.ZstdError,) if zstandard is not None else ())
 
 
 class ReportError(ConeFeederError):
@@ -659,32 +650,23 @@ def read_run(
         raise ReportError(
             f'cannot read MCAP file {str(path)!r}: {err.strerror or err}') from err
     reader = _RunReader(namespace, max_trajectories, max_trajectory_points)
-    truncated: str | None = None
     with stream:
-        records = StreamReader(stream, validate_crcs=True).records
-        try:
-            header = next(records)
-        except StopIteration:
-            header = None
-        except _READ_ERRORS as err:
-            if isinstance(err, InvalidMagic):
+        readable = RecordStream(stream)
+        records = iter(readable)
+        header = next(records, None)
+        if readable.error is not None:
+            if isinstance(readable.error, InvalidMagic):
                 reason = 'it does not start with the MCAP magic bytes'
-            elif isinstance(err, (EndOfFile, EOFError, struct.error)):
+            elif isinstance(readable.error, (EndOfFile, EOFError, struct.error)):
                 reason = 'it is empty or too short'
             else:
-                reason = _describe_error(err)
-            raise ReportError(f'{str(path)!r} is not an MCAP file ({reason})') from err
+                reason = _describe_error(readable.error)
+            raise ReportError(f'{str(path)!r} is not an MCAP file ({reason})') from readable.error
         if not isinstance(header, Header):
             raise ReportError(f'{str(path)!r} is not an MCAP file (no header record)')
-        while True:
-            try:
-                record = next(records)
-            except StopIteration:
-                break
-            except _READ_ERRORS as err:
-                truncated = _describe_error(err)
-                break
+        for record in records:
             reader.take(record)
+    truncated = None if readable.error is None else _describe_error(readable.error)
     return _finish(path, reader, truncated)
 
 

@@ -12,7 +12,12 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Helpers for tests that run sim_node as its own process and talk to it over ROS 2."""
+"""
+Helpers for the node tests: a private rclpy Context with an executor and a client node.
+
+:class:`Client` talks to a node run as its own process (:class:`SimProcess`) over ROS 2;
+:class:`InProcess` also spins the node under test, created in the test's own process.
+"""
 
 from collections.abc import Callable, Sequence
 import os
@@ -21,8 +26,9 @@ import random
 import signal
 import subprocess
 import time
-from typing import Any
+from typing import Any, Self
 
+from geometry_msgs.msg import Pose, PoseArray
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -78,34 +84,64 @@ class SimProcess:
 
 
 class Client:
-    """A test node in its own context on the given domain, with spin helpers."""
+    """
+    A test node in its own context on the given domain, with spin helpers.
 
-    def __init__(self, domain: int, namespace: str = '') -> None:
-        """Create the context, the node and an executor."""
+    ``node`` is the client node; :meth:`add` lets the executor spin more nodes (those of an
+    in-process test). close() destroys them all; ``with Client(...) as client:`` closes too.
+    """
+
+    def __init__(self, domain: int, namespace: str = '', *, name: str = 'process_test_client',
+                 timeout: float = 30.0, spin_step: float = 0.02) -> None:
+        """Create the context, the node and an executor; timeout: spin_until's default."""
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
-        self.node = Node('process_test_client', namespace=namespace, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        self.nodes: list[Node] = []
+        self.timeout = timeout
+        self.spin_step = spin_step
+        self.node = self.add(Node(name, namespace=namespace, context=self.context))
 
-    def spin_until(self, condition: Callable[[], bool], timeout: float) -> bool:
-        """Spin until condition() holds; False after timeout seconds."""
-        end = time.monotonic() + timeout
+    def __enter__(self) -> Self:
+        """Return the client (closed at the end of the with block)."""
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        """Close the client."""
+        self.close()
+
+    def add(self, node: Node) -> Any:
+        """Let the executor spin ``node`` (destroyed by close()) and return it."""
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def spin_until(self, condition: Callable[[], bool], timeout: float | None = None) -> bool:
+        """Spin until condition() holds; False after timeout seconds (None: the default)."""
+        end = time.monotonic() + (self.timeout if timeout is None else timeout)
         while not condition():
             if time.monotonic() > end:
                 return False
-            self.executor.spin_once(timeout_sec=0.02)
+            self.executor.spin_once(timeout_sec=self.spin_step)
         return True
 
     def spin_for(self, seconds: float) -> None:
         """Spin for a while (to let messages in while nothing specific is awaited)."""
         self.spin_until(lambda: False, seconds)
 
-    def call(self, srv_type: Any, name: str, request: Any, timeout: float = 30.0) -> Any:
-        """Call a service and return its response (fail the test if there is none)."""
+    def call(self, srv_type: Any, name: str, request: Any, timeout: float = 30.0,
+             ready_timeout: float | None = None) -> Any:
+        """
+        Call a service and return its response (fail the test if there is none).
+
+        ready_timeout: how long to wait for the service (None: timeout), timeout: for the
+        answer.
+        """
         client = self.node.create_client(srv_type, name)
         try:
-            assert self.spin_until(client.service_is_ready, timeout), f'no service {name}'
+            ready = self.spin_until(
+                client.service_is_ready, timeout if ready_timeout is None else ready_timeout)
+            assert ready, f'no service {name}'
             future = client.call_async(request)
             assert self.spin_until(future.done, timeout), f'{name} did not answer'
             return future.result()
@@ -113,12 +149,37 @@ class Client:
             self.node.destroy_client(client)
 
     def close(self) -> None:
-        """Destroy the node and shut the context down."""
+        """Destroy the nodes and shut the context down."""
         self.executor.shutdown()
-        self.node.destroy_node()
+        for node in self.nodes:
+            node.destroy_node()
         self.context.try_shutdown()
+
+
+class InProcess(Client):
+    """
+    A client on a random domain for a test that runs the node under test in its process.
+
+    ``client`` is the client node (``node``); the node under test is added with add().
+    """
+
+    def __init__(self, name: str, *, timeout: float, spin_step: float) -> None:
+        """Create the context, the client node ``name`` and the executor."""
+        super().__init__(random_domain(), name=name, timeout=timeout, spin_step=spin_step)
+        self.client = self.node
 
 
 def wait_for_log(process: SimProcess, client: Client, text: str, timeout: float) -> bool:
     """Spin the client until the process's output contains text."""
     return client.spin_until(lambda: text in process.log(), timeout)
+
+
+def pose_array(*points: tuple[float, float, float], frame: str = 'feeder') -> PoseArray:
+    """Return a PoseArray in ``frame`` with a pose at each (x, y, z) point."""
+    msg = PoseArray()
+    msg.header.frame_id = frame
+    for x, y, z in points:
+        pose = Pose()
+        pose.position.x, pose.position.y, pose.position.z = x, y, z
+        msg.poses.append(pose)
+    return msg

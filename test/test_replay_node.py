@@ -21,10 +21,9 @@ the exit-status checks, which run ``python -m cone_feeder_sim.replay_node``. Wal
 bounds are loose: the machine is shared.
 """
 
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 import os
 from pathlib import Path
-import random
 import subprocess
 import sys
 import time
@@ -37,15 +36,12 @@ from cone_feeder_sim.replay_node import ReplayNode
 from diagnostic_msgs.msg import DiagnosticArray
 import mcap.reader
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
+import sim_process
 from std_msgs.msg import Float64
 from visualization_msgs.msg import MarkerArray
 
@@ -71,20 +67,11 @@ def synthetic(path: Path, count: int = COUNT, chunk_size: int = 1024 * 1024) -> 
     return path
 
 
-class Ros:
+class Ros(sim_process.InProcess):
     """A private context and executor with a listening client node."""
 
     def __init__(self) -> None:
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=random.randint(100, 200))
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.nodes: list[Node] = []
-        self.client = self.add(Node('replay_test_client', context=self.context))
-
-    def add(self, node: Node) -> Any:
-        self.nodes.append(node)
-        self.executor.add_node(node)
-        return node
+        super().__init__('replay_test_client', timeout=30.0, spin_step=0.005)
 
     def listen(self, msg_type: Any, topic: str, qos: Any = 100) -> list[tuple[float, Any]]:
         """Subscribe; return the list that collects (arrival monotonic s, message)."""
@@ -97,28 +84,11 @@ class Ros:
         overrides = [Parameter(k, value=v) for k, v in params.items()]
         return self.add(ReplayNode(context=self.context, parameter_overrides=overrides))
 
-    def spin_until(self, condition: Callable[[], bool], timeout: float = 30.0) -> bool:
-        end = time.monotonic() + timeout
-        while not condition():
-            if time.monotonic() > end:
-                return False
-            self.executor.spin_once(timeout_sec=0.005)
-        return True
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        for node in self.nodes:
-            node.destroy_node()
-        self.context.try_shutdown()
-
 
 @pytest.fixture
 def ros() -> Iterator[Ros]:
-    harness = Ros()
-    try:
+    with Ros() as harness:
         yield harness
-    finally:
-        harness.close()
 
 
 def values(received: list[tuple[float, Any]]) -> list[float]:
@@ -240,7 +210,7 @@ def run_replay(tmp_path: Path, *params: str) -> subprocess.CompletedProcess:
     env = dict(os.environ)
     env['PYTHONPATH'] = os.pathsep.join([str(ROOT)] + (
         [env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
-    env['ROS_DOMAIN_ID'] = str(random.randint(100, 200))
+    env['ROS_DOMAIN_ID'] = str(sim_process.random_domain())
     args = [sys.executable, '-m', 'cone_feeder_sim.replay_node', '--ros-args']
     for param in params:
         args += ['-p', param]

@@ -18,7 +18,6 @@ from collections.abc import Callable, Iterator
 from dataclasses import fields
 import math
 from pathlib import Path
-import random
 import time
 from typing import Any
 
@@ -27,17 +26,13 @@ from cone_feeder_sim.errors import ParameterError, ScenarioError
 from cone_feeder_sim.params import SolverParams
 from cone_feeder_sim.sim_node import (
     EXIT_DTYPE, MessageRecord, parameter_specs, SimNode, STATE_DTYPE)
-from geometry_msgs.msg import Pose, PoseArray
 import numpy as np
 import pytest
-import rclpy
-from rclpy.context import Context
 from rclpy.exceptions import InvalidParameterValueException
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
+import sim_process
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
@@ -46,20 +41,11 @@ import yaml
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'sim_node.yaml'
 
 
-class Ros:
+class Ros(sim_process.InProcess):
     """A private context, executor and helper node for one test."""
 
     def __init__(self) -> None:
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=random.randint(100, 200))
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.nodes: list[Node] = []
-        self.client = self.add(Node('test_client', context=self.context))
-
-    def add(self, node: Node) -> Any:
-        self.nodes.append(node)
-        self.executor.add_node(node)
-        return node
+        super().__init__('test_client', timeout=20.0, spin_step=0.02)
 
     def sim(self, namespace: str = '', **params: Any) -> SimNode:
         params.setdefault('record_path', '')  # no runs/ directory in the working directory
@@ -69,36 +55,14 @@ class Ros:
         return self.add(SimNode(context=self.context, parameter_overrides=overrides,
                                 namespace=namespace))
 
-    def spin_until(self, condition: Callable[[], bool], timeout: float = 20.0) -> bool:
-        end = time.monotonic() + timeout
-        while not condition():
-            if time.monotonic() > end:
-                return False
-            self.executor.spin_once(timeout_sec=0.02)
-        return True
-
     def call(self, srv_type: Any, name: str, request: Any) -> Any:
-        client = self.client.create_client(srv_type, name)
-        assert self.spin_until(client.service_is_ready, 10.0), f'{name} not available'
-        future = client.call_async(request)
-        assert self.spin_until(future.done, 20.0), f'{name} did not answer'
-        self.client.destroy_client(client)
-        return future.result()
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        for node in self.nodes:
-            node.destroy_node()
-        self.context.try_shutdown()
+        return super().call(srv_type, name, request, timeout=20.0, ready_timeout=10.0)
 
 
 @pytest.fixture
 def ros() -> Iterator[Ros]:
-    harness = Ros()
-    try:
+    with Ros() as harness:
         yield harness
-    finally:
-        harness.close()
 
 
 def pause(ros: Ros, sim: SimNode) -> None:
@@ -327,14 +291,8 @@ def publish_until(ros: Ros, topic: str, msg: Any, condition: Callable[[], bool])
     return False
 
 
-def poses(*points: tuple[float, float, float], frame: str = 'feeder') -> PoseArray:
-    msg = PoseArray()
-    msg.header.frame_id = frame
-    for x, y, z in points:
-        pose = Pose()
-        pose.position.x, pose.position.y, pose.position.z = x, y, z
-        msg.poses.append(pose)
-    return msg
+#: The spawn messages of these tests.
+poses = sim_process.pose_array
 
 
 def test_spawn_accepts_valid_poses_and_refuses_others(ros: Ros) -> None:

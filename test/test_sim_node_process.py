@@ -33,14 +33,15 @@ from typing import Any
 from cone_feeder_sim.params import ChannelLayout
 from cone_feeder_sim.sim_node import EXIT_DTYPE, STATE_DTYPE
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Pose, PoseArray
+from geometry_msgs.msg import PoseArray
 import numpy as np
 import pytest
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState, PointCloud2
-from sim_process import Client, FIRST_MESSAGE_TIMEOUT, random_domain, SimProcess, wait_for_log
+from sim_process import (
+    Client, FIRST_MESSAGE_TIMEOUT, pose_array, random_domain, SimProcess, wait_for_log)
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
@@ -213,14 +214,8 @@ def test_exit_events_and_channel_mass_agree(session: Any) -> None:
     assert sum(totals[-1].data) == pytest.approx(rows['mass'].sum(), abs=1e-12)
 
 
-def spawn_message(*points: tuple[float, float, float], frame: str = 'feeder') -> PoseArray:
-    msg = PoseArray()
-    msg.header.frame_id = frame
-    for x, y, z in points:
-        pose = Pose()
-        pose.position.x, pose.position.y, pose.position.z = x, y, z
-        msg.poses.append(pose)
-    return msg
+#: The spawn messages of these tests.
+spawn_message = pose_array
 
 
 def test_spawn_reset_pause_and_step(session: Any) -> None:

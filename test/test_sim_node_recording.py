@@ -24,69 +24,38 @@ import dataclasses
 import json
 import os
 from pathlib import Path
-import random
-import time
 from typing import Any
 
 from cone_feeder_sim.recording import RecordingError
 from cone_feeder_sim.runlog import END_METADATA_NAME, INPUT_EVENTS, METADATA_NAME
 from cone_feeder_sim.sim_node import parameter_specs, SimNode
-from geometry_msgs.msg import Pose, PoseArray
+from geometry_msgs.msg import PoseArray
 import mcap.reader
 import numpy as np
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosbags.highlevel import AnyReader
+import sim_process
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
 
-class Ros:
+class Ros(sim_process.InProcess):
     """A private context and executor with a client node."""
 
     def __init__(self) -> None:
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=random.randint(100, 200))
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.nodes: list[Node] = []
-        self.client = self.add(Node('recording_test_client', context=self.context))
-
-    def add(self, node: Node) -> Any:
-        self.nodes.append(node)
-        self.executor.add_node(node)
-        return node
+        super().__init__('recording_test_client', timeout=30.0, spin_step=0.01)
 
     def sim(self, namespace: str = '', **params: Any) -> SimNode:
         overrides = [Parameter(k, value=v) for k, v in params.items()]
         return self.add(SimNode(context=self.context, parameter_overrides=overrides,
                                 namespace=namespace))
 
-    def spin_until(self, condition: Callable[[], bool], timeout: float = 30.0) -> bool:
-        end = time.monotonic() + timeout
-        while not condition():
-            if time.monotonic() > end:
-                return False
-            self.executor.spin_once(timeout_sec=0.01)
-        return True
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        for node in self.nodes:
-            node.destroy_node()
-        self.context.try_shutdown()
-
 
 @pytest.fixture
 def ros() -> Iterator[Ros]:
-    harness = Ros()
-    try:
+    with Ros() as harness:
         yield harness
-    finally:
-        harness.close()
 
 
 def plain(value: Any) -> Any:
@@ -123,13 +92,7 @@ def events(bag: dict[str, list[tuple[int, Any]]], topic: str) -> list[dict[str, 
 
 
 def pose_array(points: list[tuple[float, float, float]]) -> PoseArray:
-    msg = PoseArray()
-    msg.header.frame_id = 'feeder'
-    for x, y, z in points:
-        pose = Pose()
-        pose.position.x, pose.position.y, pose.position.z = x, y, z
-        msg.poses.append(pose)
-    return msg
+    return sim_process.pose_array(*points)
 
 
 def drive(ros: Ros, sim: SimNode, last_tick: int) -> None:
