@@ -40,7 +40,9 @@ import datetime
 import json
 import os
 from pathlib import Path
+import queue
 import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -91,6 +93,8 @@ INPUT_EVENTS = ('rotation', 'spawn', 'reset', 'reconfigure')
 FLUSH_INTERVAL_S = 0.5
 #: How often (wall-clock s) the writer thread wakes up when nothing arrives.
 _POLL_S = 0.1
+#: Token that only wakes the writer thread.
+_WAKE = object()
 #: Queued bytes beyond which the node waits for the writer (nothing is dropped).
 MAX_BACKLOG_BYTES = 256 * 1024 * 1024
 
@@ -281,11 +285,16 @@ class RunRecorder:
         except BaseException:
             self._recorder.close()
             raise
-        self._cond = threading.Condition()
-        self._queue: list[tuple[str, str, bytes, int]] = []
-        self._backlog = 0
+        # The caller's thread takes no lock that the writer thread needs: the only channel
+        # is a SimpleQueue (put is atomic and safe to interrupt), and each byte counter has
+        # one writer. A signal (SIGINT, SIGTERM) raised in the caller's thread while it held
+        # a lock, including the one inside threading.Event, can leave that lock held (the
+        # exception can land between acquiring it and entering the with block), and close()
+        # would then wait forever for a writer that can never take it.
+        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._queued_bytes = 0  # written only by the producer
+        self._done_bytes = 0  # written only by the writer thread
         self._max_backlog = max_backlog_bytes
-        self._stopping = False
         self._closed = False
         self._written = 0
         self._error: BaseException | None = None
@@ -314,14 +323,13 @@ class RunRecorder:
 
     def write(self, topic: str, type_name: str, data: bytes, log_time_ns: int) -> None:
         """Queue a serialized message for the file; log and publish time = log_time_ns."""
-        with self._cond:
-            if self._closed or self._error is not None:
-                return
-            while self._backlog > self._max_backlog and self._error is None:
-                self._cond.notify_all()  # the writer sleeps between polls: wake it now
-                self._cond.wait(_POLL_S)
-            self._queue.append((topic, type_name, data, log_time_ns))
-            self._backlog += len(data)
+        if self._closed or self._error is not None:
+            return
+        while (self._queued_bytes - self._done_bytes > self._max_backlog
+               and self._error is None and self._thread.is_alive()):
+            time.sleep(_POLL_S / 20)
+        self._queued_bytes += len(data)
+        self._queue.put((topic, type_name, data, log_time_ns))
 
     def hook(self, record: MessageRecord) -> None:
         """Queue a message of the node (its message hook); log time = its simulation time."""
@@ -329,40 +337,49 @@ class RunRecorder:
 
     def maybe_flush(self) -> None:
         """Wake the writer so that a due flush happens even when no message arrives."""
-        with self._cond:
-            self._cond.notify_all()
+        self._queue.put(_WAKE)
+
+    def _next_batch(self) -> tuple[list[tuple[str, str, bytes, int]], bool]:
+        """Return what is queued (waiting up to a poll period for it) and whether to stop."""
+        batch: list[tuple[str, str, bytes, int]] = []
+        stop = False
+        try:
+            item = self._queue.get(timeout=_POLL_S)
+        except queue.Empty:
+            return batch, stop
+        while True:
+            if item is None:
+                stop = True
+            elif item is not _WAKE:
+                batch.append(item)
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                return batch, stop
 
     def _run(self) -> None:
         while True:
-            with self._cond:
-                if not self._queue and not self._stopping:
-                    self._cond.wait(_POLL_S)
-                batch, self._queue = self._queue, []
-                self._backlog = 0
-                stopping = self._stopping
-                self._cond.notify_all()
+            batch, stop = self._next_batch()
             if self._error is None:
                 try:
                     for topic, type_name, data, log_time in batch:
                         self._recorder.write_serialized(topic, type_name, data, log_time)
                         self._written += 1
+                        self._done_bytes += len(data)
                     self._recorder.maybe_flush()
                 except Exception as exc:  # noqa: B902 - kept and reported by the caller
-                    with self._cond:
-                        self._error = exc
-                        self._queue = []
-                        self._cond.notify_all()
-            if stopping and not batch:
+                    self._error = exc
+            else:
+                self._done_bytes += sum(len(item[2]) for item in batch)
+            if stop:
                 return
 
     def close(self, end_metadata: Mapping[str, str] | None = None) -> None:
         """Write what is queued, the end metadata, summary and footer; idempotent."""
-        with self._cond:
-            if self._closed:
-                return
-            self._closed = True
-            self._stopping = True
-            self._cond.notify_all()
+        if self._closed:
+            return
+        self._closed = True
+        self._queue.put(None)
         self._thread.join()
         try:
             if end_metadata is not None and self._error is None:

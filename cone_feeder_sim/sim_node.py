@@ -646,11 +646,18 @@ class SimNode(Node):
             'exits': str(self._total_exits), 'failures': str(self._total_failures),
             'refused_inputs': str(self._refused)})
         if recorder.error is not None:
-            self.get_logger().error(f'recording {recorder.path} is incomplete: '
-                                    f'{recorder.error}')
+            self._final_log('error', f'recording {recorder.path} is incomplete: '
+                            f'{recorder.error}')
         else:
-            self.get_logger().info(f'recorded {recorder.message_count} messages to '
-                                   f'{recorder.path}')
+            self._final_log('info', f'recorded {recorder.message_count} messages to '
+                            f'{recorder.path}')
+
+    def _final_log(self, level: str, text: str) -> None:
+        """Log at shutdown: after a signal the context is gone and /rosout with it."""
+        if self.context.ok():
+            getattr(self.get_logger(), level)(text)
+        else:
+            sys.stderr.write(f'[{level.upper()}] [{self.get_name()}]: {text}\n')
 
     @property
     def recording_path(self) -> Path | None:

@@ -22,7 +22,10 @@ back with rosbags, the independent reader.
 import csv
 import datetime
 import json
+import os
 from pathlib import Path
+import subprocess
+import sys
 import time
 from typing import Any
 
@@ -257,3 +260,68 @@ def test_runner_mcap_refuses_an_unwritable_path(tmp_path: Path,
     assert cli_main(['run', str(scenario), '--events', str(tmp_path / 'e.csv'), '--quiet',
                      '--mcap', '/proc/run.mcap']) == 2
     assert "cannot open MCAP file '/proc/run.mcap'" in capsys.readouterr().err
+
+
+SIGNAL_SCRIPT = """
+import json, signal, sys, threading, time
+from cone_feeder_sim.cdr import encode
+from cone_feeder_sim.messages import TOPICS
+from cone_feeder_sim.runlog import METADATA_NAME, RunRecorder
+
+class Interrupt(Exception):
+    pass
+
+inside = False
+
+def handler(signum, frame):
+    if inside:  # raise only inside the recorder calls, like SIGINT inside a tick
+        raise Interrupt()
+
+recorder = RunRecorder(sys.argv[1], [('/a', 'std_msgs/msg/String', TOPICS['~/events'].qos)],
+                       {METADATA_NAME: {'k': 'v'}})
+data = encode('std_msgs/msg/String', {'data': 'x' * 64})
+main = threading.main_thread().ident
+stop = threading.Event()
+
+def interrupt():
+    while not stop.is_set():
+        signal.pthread_kill(main, signal.SIGUSR1)
+        time.sleep(0.0002)
+
+signal.signal(signal.SIGUSR1, handler)
+sender = threading.Thread(target=interrupt, daemon=True)
+written = interrupted = 0
+deadline = time.monotonic() + 0.5
+sender.start()
+while time.monotonic() < deadline:
+    try:
+        inside = True
+        recorder.write('/a', 'std_msgs/msg/String', data, written)
+        recorder.maybe_flush()
+        inside = False
+        written += 1
+    except Interrupt:
+        inside = False
+        interrupted += 1
+stop.set()
+sender.join()
+closer = threading.Thread(target=recorder.close, daemon=True)
+closer.start()
+closer.join(timeout=20.0)
+print(json.dumps({'hung': closer.is_alive(), 'interrupted': interrupted, 'written': written,
+                  'recorded': recorder.message_count, 'error': repr(recorder.error)}))
+"""
+
+
+def test_run_recorder_survives_signals_in_the_writing_thread(tmp_path: Path) -> None:
+    # Regression: SIGINT landing while the caller's thread held the recorder's lock left it
+    # held, and close() then waited forever for the writer thread. A child process
+    # interrupts write() and maybe_flush() thousands of times, then must close in time.
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parent.parent))
+    proc = subprocess.run([sys.executable, '-c', SIGNAL_SCRIPT, str(tmp_path / 's.mcap')],
+                          capture_output=True, text=True, timeout=120, env=env, check=False)
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert not result['hung'], result
+    assert result['interrupted'] > 10 and result['error'] == 'None', result
+    assert result['recorded'] >= result['written'], result
