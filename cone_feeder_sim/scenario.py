@@ -44,7 +44,7 @@ from .config import load_model_params, read_yaml, solver_params_from_mapping
 from .errors import ConeFeederError, ScenarioError
 from .params import ModelParams, PRODUCT_LIMITS, ProductParams, SolverParams
 from .rotation import RotationProfile
-from .simulation import check_positions
+from .simulation import check_positions, cone_surface_height
 
 SCENARIO_KEYS = ('duration', 'parameters', 'model', 'solver', 'output_interval', 'rotation',
                  'particles')
@@ -91,7 +91,7 @@ def resting_height(model: ModelParams, product: ProductParams, x: float, y: floa
         raise ScenarioError(
             f'a piece of mass {product.m} kg cannot rest on the cone with r_f = {product.r_f} N')
     gap = product.r_c + math.atanh(1.0 - 2.0 * r_a_rest) / product.r_t
-    return model.h * (1.0 - math.hypot(x, y) / model.r) + gap
+    return cone_surface_height(model, x, y) + gap
 
 
 def _vector(where: str, value: Any) -> tuple[float, float, float]:
