@@ -126,8 +126,8 @@ from . import messages
 from .cdr import CdrError, default_codec
 from .config import config_dir, DEFAULT_PARAMETER_FILE, read_yaml
 from .engine import (
-    DriveParams, EngineConfig, FeederEngine, FeedParams, pattern_from_flat, PieceSpec,
-    TickResult)
+    check_feed_fits, DriveParams, EngineConfig, FeederEngine, FeedParams, pattern_from_flat,
+    PieceSpec, TickResult)
 from .errors import ConeFeederError, ParameterError
 from .messages import (
     channel_mass_message, clock_message, cone_state_message, EXIT_DATATYPES, EXIT_DTYPE,
@@ -937,11 +937,7 @@ class SimNode(Node):
                 values[param.name] = param.value
         try:
             drive_from_values(values)
-            feed = feed_from_values(values)
-            if feed.rho_max >= self._engine.model.r:
-                raise ParameterError(
-                    f'feed.rho_max = {feed.rho_max:g} m must be inside the cone (radius '
-                    f'{self._engine.model.r:g} m)')
+            check_feed_fits(self._engine.model, feed_from_values(values))
         except ConeFeederError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
