@@ -124,7 +124,7 @@ from visualization_msgs.msg import MarkerArray
 from . import __version__
 from . import messages
 from .cdr import CdrError, default_codec
-from .config import config_dir, DEFAULT_PARAMETER_FILE, read_yaml
+from .config import load_model_params
 from .engine import (
     check_feed_fits, DriveParams, EngineConfig, FeederEngine, FeedParams, pattern_from_flat,
     PieceSpec, TickResult)
@@ -437,18 +437,6 @@ def engine_config_from_values(values: dict[str, Any], base: ModelParams) -> Engi
                         initial_pieces=pieces, seed=values['feed.seed'])
 
 
-def load_base_model(parameter_file: str) -> ModelParams:
-    """Return the model of a parameter file ('' = the package's table2.yaml)."""
-    path = Path(parameter_file) if parameter_file else config_dir() / DEFAULT_PARAMETER_FILE
-    content = read_yaml(path)
-    if not isinstance(content, dict):
-        raise ParameterError(f'{path} must hold a mapping of parameter: value')
-    try:
-        return model_params_from_mapping(content)
-    except ParameterError as exc:
-        raise ParameterError(f'{path}: {exc}') from exc
-
-
 @dataclass(frozen=True)
 class _Output:
     """A publisher with its resolved topic, type name and CDR encoder."""
@@ -508,7 +496,8 @@ class SimNode(Node):
                 name[len('model.'):]: value for name, value in self._resim.parameters.items()
                 if name.startswith('model.')})
         else:
-            self._base_model = load_base_model(file_param)
+            # '' = the package's table2.yaml
+            self._base_model = load_model_params(file_param or None)
         self._specs = {s.name: s for s in parameter_specs(self._base_model)}
         for spec in self._specs.values():
             if spec.name not in ('parameter_file', 'replay_commands'):
