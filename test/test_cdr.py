@@ -34,6 +34,7 @@ from cone_feeder_sim.cdr import (
     encode,
 )
 from cone_feeder_sim.msgdefs import MessageDefinitionRegistry
+from msg_compare import normalize
 import numpy as np
 import pytest
 from rosbags.typesys import get_types_from_msg, get_typestore
@@ -140,25 +141,6 @@ def sample_messages() -> dict:
 
 SAMPLES = sample_messages()
 TYPES = sorted(SAMPLES)
-
-
-def normalize(value: Any) -> Any:
-    """Return plain Python data (lists, dicts, numbers, str) for comparisons."""
-    if isinstance(value, dict):
-        return {key: normalize(item) for key, item in value.items()}
-    if hasattr(value, '__dataclass_fields__'):  # rosbags message; constants are upper case
-        return {
-            key: normalize(getattr(value, key))
-            for key in value.__dataclass_fields__ if key != '__msgtype__' and not key.isupper()}
-    if isinstance(value, (bytes, bytearray, memoryview, array.array)):
-        return list(bytes(value)) if not isinstance(value, array.array) else value.tolist()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (list, tuple)):
-        return [normalize(item) for item in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
 
 
 def rclpy_class(type_name: str) -> Any:

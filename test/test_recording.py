@@ -43,6 +43,7 @@ from cone_feeder_sim.recording import (
 )
 import mcap.exceptions
 import mcap.reader
+from msg_compare import normalize
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
@@ -109,23 +110,6 @@ def sample_stream() -> list:
             'status': [{'level': 0, 'name': 'sim', 'message': 'ok', 'hardware_id': '',
                         'values': [{'key': 'k', 'value': 'v'}]}]}),
     ]
-
-
-def normalize(value: Any) -> Any:
-    """Return plain Python data (lists, dicts, numbers, str) for comparisons."""
-    if isinstance(value, dict):
-        return {key: normalize(item) for key, item in value.items()}
-    if hasattr(value, '__dataclass_fields__'):  # rosbags message; constants are upper case
-        return {
-            key: normalize(getattr(value, key))
-            for key in value.__dataclass_fields__ if key != '__msgtype__' and not key.isupper()}
-    if isinstance(value, (bytes, bytearray, memoryview)):
-        return list(bytes(value))
-    if isinstance(value, np.ndarray):
-        return value.view(np.uint8).tolist() if value.dtype == np.uint8 else value.tolist()
-    if isinstance(value, (list, tuple)):
-        return [normalize(item) for item in value]
-    return value
 
 
 def stream_messages(data: bytes) -> list:
