@@ -38,17 +38,13 @@ from cone_feeder_sim.simulation import ExitEvents, Setup, Simulator
 import numpy as np
 import pytest
 
+import reference_model
+
 CW = -10.47     # rad/s, the paper's clockwise rotation (about 100 rpm)
 CCW = 10.47     # rad/s
 TILT = math.radians(7.5)
 G = 9.81
-TABLE1_STARTS: dict[int, tuple[float, float, float]] = {
-    1: (0.11, -0.01, 0.03),
-    2: (-0.10, -0.01, 0.03),
-    3: (0.08, -0.13, 0.03),
-    4: (-0.07, 0.04, 0.03),
-    5: (0.14, 0.06, 0.03),
-}
+TABLE1_STARTS = reference_model.TABLE1_STARTS
 REVERSING = [[0.0, 0.0], [0.4, CW], [1.0, CW], [1.4, CCW]]
 
 
