@@ -161,6 +161,24 @@ def normal_force(s_perp, v_perp, r_t, r_c, r_d, r_f):
     return r_a_act, f_c, r_a_act * f_c
 
 
+@jit
+def friction_target(u0, u1, u2, u_n, v_full, n_fric, r_a_act, e0, e1, e2, pp, gp):
+    """
+    Return (Q_s^c as 3 floats, a/T_F): the filter's target force (N) and rate (1/s).
+
+    u (m/s) the relative velocity, u_n = u . e_Fc, v_full = |u| (eq. 14 uses the full
+    relative speed); with the tangential option the component along e_Fc is removed first.
+    """
+    if gp[G_TANGENTIAL] != 0.0:
+        c = u_n / (e0 * e0 + e1 * e1 + e2 * e2)
+        u0, u1, u2 = u0 - c * e0, u1 - c * e1, u2 - c * e2
+    (ev0, ev1, ev2), v = friction_direction(u0, u1, u2, gp[G_EPS])
+    mag = static_friction_magnitude(v, n_fric, r_a_act, pp[P_D], pp[P_MU_C], pp[P_V_C],
+                                    pp[P_V_S], pp[P_C_S])
+    rate = filter_gain(v_full, pp[P_QDOT_F]) / pp[P_T_F]
+    return mag * ev0, mag * ev1, mag * ev2, rate
+
+
 # --- eq. (38): combined dynamics, world frame ----------------------------------------------
 
 @jit
@@ -181,14 +199,8 @@ def rhs_world(y, pp, gp, omega, out):
     n_fric = n_force / pp[P_R_F] if gp[G_LITERAL] != 0.0 else n_force
     u0, u1, u2 = relative_velocity(y[0:3], y[3:6], omega)
     v_full = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-    if gp[G_TANGENTIAL] != 0.0:
-        gn2 = e0 * e0 + e1 * e1 + e2 * e2
-        c = (u0 * e0 + u1 * e1 + u2 * e2) / gn2
-        u0, u1, u2 = u0 - c * e0, u1 - c * e1, u2 - c * e2
-    (ev0, ev1, ev2), v = friction_direction(u0, u1, u2, gp[G_EPS])
-    mag = static_friction_magnitude(v, n_fric, r_a_act, pp[P_D], pp[P_MU_C], pp[P_V_C],
-                                    pp[P_V_S], pp[P_C_S])
-    rate = filter_gain(v_full, pp[P_QDOT_F]) / pp[P_T_F]
+    q0, q1, q2, rate = friction_target(u0, u1, u2, u0 * e0 + u1 * e1 + u2 * e2, v_full,
+                                       n_fric, r_a_act, e0, e1, e2, pp, gp)
     m = pp[P_M]
     out[0] = y[3]
     out[1] = y[4]
@@ -196,9 +208,9 @@ def rhs_world(y, pp, gp, omega, out):
     out[3] = (y[6] + n_force * e0) / m
     out[4] = (y[7] + n_force * e1) / m
     out[5] = (y[8] + n_force * e2) / m - gp[G_G]
-    out[6] = rate * (mag * ev0 - y[6])
-    out[7] = rate * (mag * ev1 - y[7])
-    out[8] = rate * (mag * ev2 - y[8])
+    out[6] = rate * (q0 - y[6])
+    out[7] = rate * (q1 - y[7])
+    out[8] = rate * (q2 - y[8])
 
 
 # --- the same system in the frame turning with the cone, with its Jacobian ---------------
@@ -222,15 +234,8 @@ def rhs(y, pp, gp, omega, domega, out):
                                        pp[P_R_F])
     n_fric = n_force / pp[P_R_F] if gp[G_LITERAL] != 0.0 else n_force
     v_full = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-    u0, u1, u2 = w0, w1, w2
-    if gp[G_TANGENTIAL] != 0.0:
-        gn2 = e0 * e0 + e1 * e1 + e2 * e2
-        c = v_perp / gn2
-        u0, u1, u2 = u0 - c * e0, u1 - c * e1, u2 - c * e2
-    (ev0, ev1, ev2), v = friction_direction(u0, u1, u2, gp[G_EPS])
-    mag = static_friction_magnitude(v, n_fric, r_a_act, pp[P_D], pp[P_MU_C], pp[P_V_C],
-                                    pp[P_V_S], pp[P_C_S])
-    rate = filter_gain(v_full, pp[P_QDOT_F]) / pp[P_T_F]
+    q0, q1, q2, rate = friction_target(w0, w1, w2, v_perp, v_full, n_fric, r_a_act, e0, e1,
+                                       e2, pp, gp)
     m = pp[P_M]
     om2 = omega * omega
     out[0] = w0
@@ -239,9 +244,9 @@ def rhs(y, pp, gp, omega, domega, out):
     out[3] = (y[6] + n_force * e0) / m + 2.0 * omega * w1 + om2 * x0 + domega * x1
     out[4] = (y[7] + n_force * e1) / m - 2.0 * omega * w0 + om2 * x1 - domega * x0
     out[5] = (y[8] + n_force * e2) / m - gp[G_G]
-    out[6] = rate * (mag * ev0 - y[6]) + omega * y[7]
-    out[7] = rate * (mag * ev1 - y[7]) - omega * y[6]
-    out[8] = rate * (mag * ev2 - y[8])
+    out[6] = rate * (q0 - y[6]) + omega * y[7]
+    out[7] = rate * (q1 - y[7]) - omega * y[6]
+    out[8] = rate * (q2 - y[8])
 
 
 @jit
