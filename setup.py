@@ -31,8 +31,10 @@ setup(
     ],
     # The ROS 2 Python packages (rclpy, message packages) come from the ROS installation
     # (apt) or from the PyPI ros-jazzy-* wheels; they are deliberately not listed here.
-    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'numba', 'mcap',
-                      'matplotlib'],
+    # Floors: requirements/runtime.txt says why each is the oldest version the code runs on.
+    install_requires=['setuptools', 'numpy>=1.23.2', 'numba>=0.57', 'pyyaml>=6.0',
+                      'mcap>=1.6.0', 'rosbags>=0.10.8', 'matplotlib>=3.6'],
+    python_requires='>=3.11',
     zip_safe=True,
     maintainer='cone_feeder_sim maintainers',
     maintainer_email='maintainers@cone-feeder-sim.invalid',
@@ -43,9 +45,9 @@ setup(
     entry_points={
         'console_scripts': [
             'cone-feeder-sim = cone_feeder_sim.cli:main',
-            'sim_node = cone_feeder_sim.sim_node:main',
-            'replay_node = cone_feeder_sim.replay_node:main',
-            'example_controller = cone_feeder_sim.example_controller:main',
+            'sim_node = cone_feeder_sim.ros.sim_node:main',
+            'replay_node = cone_feeder_sim.ros.replay_node:main',
+            'example_controller = cone_feeder_sim.ros.example_controller:main',
         ],
     },
 )

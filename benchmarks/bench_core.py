@@ -46,8 +46,8 @@ INTERVAL = 0.02
 
 def starts(count: int, seed: int = 1) -> np.ndarray:
     """Return (count, 3) start positions resting on the cone, rho in [0.03, 0.19] m."""
-    from cone_feeder_sim.params import ModelParams
-    from cone_feeder_sim.scenario import resting_height
+    from cone_feeder_sim.physics.params import ModelParams
+    from cone_feeder_sim.physics.simulation import resting_height
     model = ModelParams()
     rng = np.random.default_rng(seed)
     rho = np.sqrt(rng.uniform(0.03 ** 2, 0.19 ** 2, count))
@@ -59,8 +59,8 @@ def starts(count: int, seed: int = 1) -> np.ndarray:
 
 def run(count: int) -> dict[str, float]:
     """Simulate count pieces; return timing, particle-seconds and exits."""
-    from cone_feeder_sim.rotation import RotationProfile
-    from cone_feeder_sim.simulation import Setup, Simulator
+    from cone_feeder_sim.physics.rotation import RotationProfile
+    from cone_feeder_sim.physics.simulation import Setup, Simulator
     profile = RotationProfile.from_table(TABLE)
     sim = Simulator(Setup(), profile)
     sim.add(starts(count))
@@ -92,8 +92,8 @@ def accuracy(sample: int) -> dict[str, float]:
     """
     sys.path.insert(0, str(ROOT / 'test'))
     import reference_model as ref
-    from cone_feeder_sim.rotation import RotationProfile
-    from cone_feeder_sim.simulation import Setup, Simulator
+    from cone_feeder_sim.physics.rotation import RotationProfile
+    from cone_feeder_sim.physics.simulation import Setup, Simulator
     pos = starts(4 * sample)
     sim = Simulator(Setup(), RotationProfile.from_table(TABLE))
     sim.add(pos)

@@ -89,7 +89,7 @@ print('received', count[0], flush=True)
 
 def resting_positions(model: Any, count: int, rng: np.random.Generator) -> np.ndarray:
     """Return count resting positions spread uniformly (per area) over 0.03..0.20 m."""
-    from cone_feeder_sim.scenario import resting_height
+    from cone_feeder_sim.physics.simulation import resting_height
     rho = np.sqrt(rng.uniform(0.03 ** 2, 0.20 ** 2, count))
     theta = rng.uniform(0.0, 2.0 * math.pi, count)
     x, y = rho * np.cos(theta), rho * np.sin(theta)
@@ -99,8 +99,8 @@ def resting_positions(model: Any, count: int, rng: np.random.Generator) -> np.nd
 
 def measure(context: Context, count: int, args: argparse.Namespace) -> dict[str, Any]:
     """Run the node with count pieces; return the achieved RTF and the time split."""
-    from cone_feeder_sim.params import ModelParams
-    from cone_feeder_sim.sim_node import SimNode
+    from cone_feeder_sim.physics.params import ModelParams
+    from cone_feeder_sim.ros.sim_node import SimNode
     model = ModelParams()
     rng = np.random.default_rng(count)
     positions = resting_positions(model, count, rng)

@@ -31,11 +31,12 @@ from typing import TextIO
 
 from . import __version__
 from .errors import ConeFeederError
-from .events_io import write_events_csv
-from .runlog import ScenarioRecorder
-from .runner import run_scenario
-from .scenario import load_scenario, Scenario
-from .simulation import Simulator, StepResult
+from .feeder.runner import run_scenario
+from .feeder.scenario import Scenario
+from .formats.events_csv import write_events_csv
+from .formats.runlog import ScenarioRecorder
+from .formats.scenario_file import load_scenario
+from .physics.simulation import Simulator, StepResult
 
 
 class ProgressBar:
@@ -140,7 +141,7 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
 
 def cmd_report(args: argparse.Namespace, err: TextIO) -> int:
     """Write the PNG report of a recorded run; return the exit code."""
-    from .report import DEFAULT_MAX_TRAJECTORIES, write_report  # matplotlib only when needed
+    from .report.draw import DEFAULT_MAX_TRAJECTORIES, write_report  # matplotlib when needed
 
     out = args.out if args.out else str(Path(args.mcap).with_suffix('.png'))
     if args.max_trajectories is not None and args.max_trajectories < 1:

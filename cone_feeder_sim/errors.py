@@ -27,5 +27,13 @@ class ScenarioError(ConeFeederError, ValueError):
     """A scenario file or a particle specification is malformed."""
 
 
-class IntegrationError(ConeFeederError, RuntimeError):
-    """The integrator could not advance a particle (step size underflow, non-finite state)."""
+class RecordingError(ConeFeederError):
+    """A recording cannot be opened, written, read or recovered."""
+
+
+class MessageError(ConeFeederError, ValueError):
+    """A message's content does not fit its type (e.g. a PointCloud2 whose points do not fit)."""
+
+
+class ReportError(ConeFeederError):
+    """A recording cannot be read for a report, or the report cannot be written."""

@@ -19,9 +19,9 @@ import io
 from pathlib import Path
 
 from cone_feeder_sim.cli import main, ProgressBar
-from cone_feeder_sim.events_io import EVENT_COLUMNS
-from cone_feeder_sim.runner import run_scenario
-from cone_feeder_sim.scenario import scenario_from_mapping
+from cone_feeder_sim.feeder.runner import run_scenario
+from cone_feeder_sim.formats.events_csv import EVENT_COLUMNS
+from cone_feeder_sim.formats.scenario_file import scenario_from_mapping
 import numpy as np
 import pytest
 

@@ -1,0 +1,648 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The live simulation without ROS: a cone drive, a product feed and inputs applied per tick.
+
+:class:`FeederEngine` advances the physics core (:func:`~cone_feeder_sim.simulation.advance`)
+by a fixed simulated step ``dt`` on every :meth:`FeederEngine.tick`. It owns
+
+* the **cone drive**: the cone's angular velocity follows a target within
+  ``max_angular_acceleration`` (rad/s^2); the target is clamped to
+  ``[-max_angular_velocity, max_angular_velocity]`` (rad/s). The target is the open-loop
+  pattern (segments ``(duration s, omega rad/s)``, looped, time measured from the start or
+  the last reset) until the first rotation command; after that the last command, or 0 once
+  ``cmd_timeout`` seconds of simulation time have passed without a command (0 = hold the
+  last command for ever). The target is sampled at the start of each tick; within the tick
+  omega ramps linearly at the acceleration limit and is held once the target is reached,
+  so the tick's :class:`~cone_feeder_sim.rotation.RotationProfile` has a kink inside the
+  tick when the target is reached mid-tick.
+* the **product feed**: pieces arrive as a Poisson process of ``rate`` pieces/s (the count
+  per tick is Poisson(rate * dt)), at positions uniform over the annulus
+  ``rho_min <= rho <= rho_max`` (uniform per area) at ``drop_height`` above the cone
+  surface (centre of the piece, measured vertically), at rest in the world frame (dropped,
+  not carried). Masses are log-normal with the default product's mass as mean and relative
+  standard deviation ``mass_rel_std``; the damping d is drawn uniformly from ``d_values``
+  (empty: the default product's d). All draws come from one ``numpy.random.Generator``
+  seeded with ``seed``, so the feed is reproducible.
+* the **inputs** (rotation commands, spawn requests, resets and reconfigurations): they
+  are validated when submitted (invalid ones raise a
+  :class:`~cone_feeder_sim.errors.ConeFeederError` subclass and are not queued; the engine
+  carries on), queued, and applied at the start of the next tick in arrival order. Every
+  :class:`TickResult` lists the inputs it applied, so a run is reproduced exactly from its
+  :class:`EngineConfig` and the pairs (tick index, input): see :meth:`FeederEngine.submit`.
+
+Time is ``tick_index * dt`` exactly (no accumulated rounding). A reset does not turn time
+back (stamps stay monotonic) and particle ids keep counting (ids are unique over a run):
+it removes every piece, zeroes the channel masses, stops the cone (omega = 0, angle = 0,
+the one place where the acceleration limit is not applied), restarts the open-loop
+pattern, forgets the rotation commands, re-seeds the feed generator and places the initial
+pieces again. The drive and feed parameters in force (after reconfigurations) are kept.
+
+No wall clock is read here: timing belongs to the caller (the ROS node).
+"""
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+import math
+from typing import Any
+
+import numpy as np
+
+from ..errors import ParameterError, ScenarioError
+from ..physics.params import (
+    check_integer, check_number, Limit, ModelParams, P_M, PRODUCT_LIMITS, ProductParams,
+    SolverParams)
+from ..physics.rotation import RotationProfile
+from ..physics.simulation import (
+    add_particles, advance, as_points, check_positions, ExitEvents, Failure, Setup, SimState,
+    StepStats, world_from_cone)
+
+__all__ = [
+    'DriveParams',
+    'EngineConfig',
+    'EngineInput',
+    'FeedParams',
+    'FeederEngine',
+    'PieceSpec',
+    'Reconfigure',
+    'ResetRequest',
+    'RotationCommand',
+    'SpawnRequest',
+    'TickResult',
+    'pattern_from_flat',
+]
+
+#: Allowed ranges of the engine's own settings (the model's are in cone_feeder_sim.params).
+ENGINE_LIMITS: dict[str, Limit] = {
+    'dt': Limit(0.0, 1.0, 's', lo_open=True),
+    'max_angular_velocity': Limit(0.0, 100.0, 'rad/s', lo_open=True),
+    'max_angular_acceleration': Limit(0.0, 1.0e4, 'rad/s^2', lo_open=True),
+    'cmd_timeout': Limit(0.0, 1.0e6, 's'),
+    'pattern_duration': Limit(0.0, 1.0e6, 's', lo_open=True),
+    'pattern_omega': Limit(-100.0, 100.0, 'rad/s'),
+    'feed_rate': Limit(0.0, 1.0e4, 'pieces/s'),
+    'feed_rho': Limit(0.0, 20.0, 'm'),
+    'feed_drop_height': Limit(0.0, 10.0, 'm'),
+    'feed_mass_rel_std': Limit(0.0, 1.0, ''),
+    'max_pieces': Limit(1, 10 ** 6, ''),
+    'seed': Limit(0, 2 ** 63 - 1, ''),
+}
+
+#: Segment boundaries of the open-loop pattern closer than this (s) count as reached.
+PATTERN_TOLERANCE = 1.0e-9
+
+#: Largest number of pieces one spawn request may hold.
+MAX_SPAWN = 100_000
+
+
+def pattern_from_flat(values: Sequence[float]) -> tuple[tuple[float, float], ...]:
+    """
+    Return pattern segments from a flat list [duration_1, omega_1, duration_2, ...].
+
+    ROS parameters cannot hold nested lists, so the node stores the pattern flat. An empty
+    list is an empty pattern (the cone rests until the first command).
+    """
+    flat = list(values)
+    if len(flat) % 2:
+        raise ParameterError(
+            f'the open-loop pattern must be pairs [duration s, omega rad/s, ...]; got '
+            f'{len(flat)} numbers')
+    return tuple((flat[i], flat[i + 1]) for i in range(0, len(flat), 2))
+
+
+@dataclass(frozen=True)
+class DriveParams:
+    """
+    The cone drive: limits, command timeout and the open-loop pattern.
+
+    max_angular_velocity (rad/s) clamps the target; max_angular_acceleration (rad/s^2) limits
+    how fast omega follows it; cmd_timeout (s of simulation time, 0 = hold) stops the cone
+    when commands stop; pattern: segments (duration s, omega rad/s), looped, the target until
+    the first command (empty: rest).
+    """
+
+    max_angular_velocity: float = 10.47
+    max_angular_acceleration: float = 20.0
+    cmd_timeout: float = 0.5
+    pattern: tuple[tuple[float, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        """Validate every field; errors name the field."""
+        for key in ('max_angular_velocity', 'max_angular_acceleration', 'cmd_timeout'):
+            object.__setattr__(self, key, check_number(key, getattr(self, key),
+                                                       ENGINE_LIMITS[key]))
+        segments = []
+        for i, segment in enumerate(self.pattern):
+            if isinstance(segment, (str, bytes)) or len(segment) != 2:
+                raise ParameterError(
+                    f'pattern[{i}] must be a pair (duration s, omega rad/s), got {segment!r}')
+            duration = check_number(f'pattern[{i}] duration', segment[0],
+                                    ENGINE_LIMITS['pattern_duration'])
+            omega = check_number(f'pattern[{i}] omega', segment[1],
+                                 ENGINE_LIMITS['pattern_omega'])
+            segments.append((duration, omega))
+        object.__setattr__(self, 'pattern', tuple(segments))
+
+    @property
+    def period(self) -> float:
+        """Return the duration of one loop of the pattern (s); 0 for an empty pattern."""
+        return float(sum(d for d, _ in self.pattern))
+
+    def pattern_omega(self, t: float) -> float:
+        """
+        Return the pattern's omega (rad/s) at time t (s) after the pattern started.
+
+        A segment boundary closer than 1 ns counts as reached, so that boundaries which are
+        multiples of the tick fall on the tick despite rounding.
+        """
+        if not self.pattern:
+            return 0.0
+        phase = math.fmod(max(t, 0.0) + PATTERN_TOLERANCE, self.period)
+        for duration, omega in self.pattern:
+            if phase < duration:
+                return omega
+            phase -= duration
+        return self.pattern[-1][1]
+
+
+@dataclass(frozen=True)
+class FeedParams:
+    """
+    The product feed: Poisson arrivals over an annulus, with product variation.
+
+    rate (pieces/s, 0 = off); rho_min, rho_max (m) the drop annulus; drop_height (m) of the
+    piece's centre above the cone surface; mass_rel_std relative standard deviation of the
+    (log-normal) mass; d_values (N*s/m) damping values drawn uniformly (empty: default);
+    max_pieces: the feed pauses while this many pieces are on the cone.
+    """
+
+    rate: float = 0.0
+    rho_min: float = 0.03
+    rho_max: float = 0.15
+    drop_height: float = 0.05
+    mass_rel_std: float = 0.0
+    d_values: tuple[float, ...] = ()
+    max_pieces: int = 2000
+
+    def __post_init__(self) -> None:
+        """Validate every field; errors name the field."""
+        object.__setattr__(self, 'rate', check_number('feed.rate', self.rate,
+                                                      ENGINE_LIMITS['feed_rate']))
+        for key in ('rho_min', 'rho_max'):
+            object.__setattr__(self, key, check_number(f'feed.{key}', getattr(self, key),
+                                                       ENGINE_LIMITS['feed_rho']))
+        if not self.rho_min <= self.rho_max:
+            raise ParameterError(f'feed.rho_min = {self.rho_min:g} m must not exceed '
+                                 f'feed.rho_max = {self.rho_max:g} m')
+        object.__setattr__(self, 'drop_height', check_number(
+            'feed.drop_height', self.drop_height, ENGINE_LIMITS['feed_drop_height']))
+        object.__setattr__(self, 'mass_rel_std', check_number(
+            'feed.mass_rel_std', self.mass_rel_std, ENGINE_LIMITS['feed_mass_rel_std']))
+        if isinstance(self.d_values, (str, bytes)):
+            raise ParameterError(f'feed.d_values must be a list of numbers, got '
+                                 f'{self.d_values!r}')
+        object.__setattr__(self, 'd_values', tuple(
+            check_number(f'feed.d_values[{i}]', v, PRODUCT_LIMITS['d'])
+            for i, v in enumerate(self.d_values)))
+        object.__setattr__(self, 'max_pieces', check_integer(
+            'feed.max_pieces', self.max_pieces, ENGINE_LIMITS['max_pieces']))
+
+
+@dataclass(frozen=True, eq=False)
+class PieceSpec:
+    """A piece placed at the start and after every reset: world position (m), product."""
+
+    position: tuple[float, float, float]
+    velocity: tuple[float, float, float] | None = None
+    product: ProductParams | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class EngineConfig:
+    """
+    Everything a run depends on besides its inputs.
+
+    dt (s) the simulated time per tick; seed of the feed generator; initial_pieces placed at
+    t = 0 and after every reset (velocity None: lying on the resting cone).
+    """
+
+    model: ModelParams = ModelParams()
+    solver: SolverParams = SolverParams()
+    dt: float = 0.02
+    drive: DriveParams = DriveParams()
+    feed: FeedParams = FeedParams()
+    initial_pieces: tuple[PieceSpec, ...] = ()
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        """Validate dt, the seed, the feed annulus and the initial pieces."""
+        object.__setattr__(self, 'dt', check_number('dt', self.dt, ENGINE_LIMITS['dt']))
+        object.__setattr__(self, 'seed', check_integer('seed', self.seed,
+                                                       ENGINE_LIMITS['seed']))
+        check_feed_fits(self.model, self.feed)
+        object.__setattr__(self, 'initial_pieces', tuple(self.initial_pieces))
+        for i, piece in enumerate(self.initial_pieces):
+            try:
+                check_positions(self.model, as_points('position', piece.position, 1))
+                if piece.velocity is not None:
+                    as_points('velocity', piece.velocity, 1)
+            except ScenarioError as exc:
+                raise ScenarioError(f'initial piece {i}: {exc}') from exc
+
+
+def check_feed_fits(model: ModelParams, feed: FeedParams) -> None:
+    """Refuse a feed annulus that reaches the cone edge."""
+    if feed.rho_max >= model.r:
+        raise ParameterError(
+            f'feed.rho_max = {feed.rho_max:g} m must be inside the cone (radius r = '
+            f'{model.r:g} m)')
+
+
+@dataclass(frozen=True)
+class RotationCommand:
+    """Set the cone's target angular velocity (rad/s, > 0 counter-clockwise from above)."""
+
+    omega: float
+
+
+@dataclass(frozen=True, eq=False)
+class SpawnRequest:
+    """
+    Add pieces: world positions (M, 3) (m), velocities (M, 3) (m/s) or None, products.
+
+    velocities None: the pieces move with the cone surface (carried); zeros: dropped.
+    products None: the default product for every piece.
+    """
+
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+    products: tuple[ProductParams, ...] | None = None
+
+
+@dataclass(frozen=True)
+class ResetRequest:
+    """Start over: see the module documentation for what a reset keeps."""
+
+
+@dataclass(frozen=True)
+class Reconfigure:
+    """Replace the drive and/or feed parameters (None keeps the current ones)."""
+
+    drive: DriveParams | None = None
+    feed: FeedParams | None = None
+
+
+EngineInput = RotationCommand | SpawnRequest | ResetRequest | Reconfigure
+
+
+@dataclass(frozen=True, eq=False)
+class TickResult:
+    """
+    Everything one tick produced (all that the ROS node publishes for it).
+
+    index: the tick's index (0 for the first); t0, t (s): start and end of the tick;
+    angle (rad, cumulative) and omega (rad/s) of the cone at t; target_omega (rad/s) the
+    clamped target used in this tick; mode: 'pattern', 'command' or 'timeout';
+    ids (N,), positions (N, 3) (m), velocities (N, 3) (m/s), masses (N,) (kg) of the pieces
+    on the cone at t, world frame; exits and failures during the tick; stats of the solver;
+    channel_mass (channel_count,) cumulative kg per channel (index 0 = channel 1) at t;
+    applied: the inputs applied at t0, in order; spawned_ids: ids added at t0 (requests and
+    feed); feed_ids: the subset added by the feed; reset: whether a reset was applied.
+    """
+
+    index: int
+    t0: float
+    t: float
+    angle: float
+    omega: float
+    target_omega: float
+    mode: str
+    ids: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    masses: np.ndarray
+    exits: ExitEvents
+    failures: tuple[Failure, ...]
+    stats: StepStats
+    channel_mass: np.ndarray
+    applied: tuple[EngineInput, ...] = ()
+    spawned_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    feed_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    reset: bool = False
+
+    @property
+    def count(self) -> int:
+        """Return the number of pieces on the cone at t."""
+        return int(self.ids.shape[0])
+
+
+def drive_profile(t0: float, t1: float, omega0: float, target: float,
+                  max_acceleration: float) -> RotationProfile:
+    """
+    Return omega over [t0, t1]: a ramp at max_acceleration towards target, then held.
+
+    The ramp reaches the target at t0 + |target - omega0| / max_acceleration; when that is
+    inside the tick the profile has a kink there, otherwise omega moves by
+    max_acceleration * (t1 - t0) towards the target.
+    """
+    diff = target - omega0
+    dt = t1 - t0
+    if diff == 0.0:
+        return RotationProfile(np.array([t0, t1]), np.array([omega0, omega0]))
+    tau = abs(diff) / max_acceleration
+    if tau >= dt:
+        omega1 = omega0 + math.copysign(max_acceleration * dt, diff)
+        return RotationProfile(np.array([t0, t1]), np.array([omega0, omega1]))
+    t_reach = t0 + tau
+    if t_reach <= t0:
+        # the step is below the resolution of t0: take it at once (|diff| ~ a * ulp(t0))
+        return RotationProfile(np.array([t0, t1]), np.array([target, target]))
+    if t_reach >= t1:
+        return RotationProfile(np.array([t0, t1]), np.array([omega0, target]))
+    return RotationProfile(np.array([t0, t_reach, t1]), np.array([omega0, target, target]))
+
+
+class FeederEngine:
+    """
+    The cone feeder as a live simulation: call :meth:`tick` once per fixed step.
+
+    Deterministic: the same config and the same inputs submitted before the same ticks give
+    bit-identical results. Not thread-safe: submit inputs from the thread that ticks.
+    """
+
+    def __init__(self, config: EngineConfig) -> None:
+        """Start at t = 0 with the cone at rest and the initial pieces placed."""
+        self._config = config
+        self._setup = Setup(model=config.model, solver=config.solver)
+        self._drive = config.drive
+        self._feed = config.feed
+        self._pending: list[EngineInput] = []
+        self._index = 0
+        self._state = SimState()
+        self._channel_mass = np.zeros(config.model.channels.count)
+        self._start(0.0)
+
+    def _start(self, t: float) -> None:
+        """Put the run in its initial condition at time t (keep ids counting)."""
+        self._state = replace(self._state, t=t, angle=0.0, y=self._state.y[:0],
+                              products=self._state.products[:0], ids=self._state.ids[:0],
+                              h=self._state.h[:0])
+        self._omega = 0.0
+        self._pattern_start = t
+        self._commanded = False
+        self._command = 0.0
+        self._command_time = t
+        self._channel_mass[:] = 0.0
+        self._rng = np.random.default_rng(self._config.seed)
+        for piece in self._config.initial_pieces:
+            self._state, _ = add_particles(
+                self._state, self._setup, [piece.position],
+                None if piece.velocity is None else [piece.velocity],
+                None if piece.product is None else [piece.product], omega=self._omega)
+
+    # ------------------------------------------------------------------ properties
+
+    @property
+    def config(self) -> EngineConfig:
+        """Return the configuration the engine was built with (drive/feed: initial ones)."""
+        return self._config
+
+    @property
+    def drive(self) -> DriveParams:
+        """Return the drive parameters in force."""
+        return self._drive
+
+    @property
+    def feed(self) -> FeedParams:
+        """Return the feed parameters in force."""
+        return self._feed
+
+    @property
+    def model(self) -> ModelParams:
+        """Return the model parameters."""
+        return self._config.model
+
+    @property
+    def dt(self) -> float:
+        """Return the simulated time per tick (s)."""
+        return self._config.dt
+
+    @property
+    def tick_index(self) -> int:
+        """Return the index of the next tick (the number of ticks done so far)."""
+        return self._index
+
+    @property
+    def t(self) -> float:
+        """Return the simulation time (s)."""
+        return self._state.t
+
+    @property
+    def angle(self) -> float:
+        """Return the cone's angle in rad, cumulative since the start or the last reset."""
+        return self._state.angle
+
+    @property
+    def omega(self) -> float:
+        """Return the cone's angular velocity now (rad/s)."""
+        return self._omega
+
+    @property
+    def state(self) -> SimState:
+        """Return the immutable particle state."""
+        return self._state
+
+    @property
+    def piece_count(self) -> int:
+        """Return the number of pieces on the cone."""
+        return self._state.count
+
+    @property
+    def channel_mass(self) -> np.ndarray:
+        """Return a copy of the cumulative mass per channel (kg), index 0 = channel 1."""
+        return self._channel_mass.copy()
+
+    @property
+    def pending(self) -> tuple[EngineInput, ...]:
+        """Return the inputs waiting for the next tick, in arrival order."""
+        return tuple(self._pending)
+
+    # ------------------------------------------------------------------ inputs
+
+    def submit(self, item: EngineInput) -> None:
+        """
+        Validate an input and queue it for the start of the next tick.
+
+        Raises ParameterError or ScenarioError (and queues nothing) for invalid input.
+        """
+        if isinstance(item, RotationCommand):
+            if isinstance(item.omega, bool) or not isinstance(item.omega,
+                                                              (int, float, np.floating)):
+                raise ParameterError(f'rotation command must be a number (rad/s), got '
+                                     f'{item.omega!r}')
+            if not math.isfinite(item.omega):
+                raise ParameterError(f'rotation command must be finite, got {item.omega!r}')
+            item = RotationCommand(float(item.omega))
+        elif isinstance(item, SpawnRequest):
+            item = self._checked_spawn(item)
+        elif isinstance(item, Reconfigure):
+            if item.feed is not None:
+                check_feed_fits(self._config.model, item.feed)
+        elif not isinstance(item, ResetRequest):
+            raise ParameterError(f'unknown engine input {item!r}')
+        self._pending.append(item)
+
+    def _checked_spawn(self, item: SpawnRequest) -> SpawnRequest:
+        positions = as_points('spawn position', item.positions, None)
+        count = positions.shape[0]
+        if count == 0:
+            raise ScenarioError('a spawn request needs at least one position')
+        if count > MAX_SPAWN:
+            raise ScenarioError(f'a spawn request may hold at most {MAX_SPAWN} pieces, got '
+                                f'{count}')
+        check_positions(self._config.model, positions)
+        velocities = (None if item.velocities is None
+                      else as_points('spawn velocity', item.velocities, count))
+        products = None
+        if item.products is not None:
+            products = tuple(item.products)
+            if len(products) != count:
+                raise ScenarioError(f'{len(products)} products given for {count} positions')
+            for product in products:
+                if not isinstance(product, ProductParams):
+                    raise ScenarioError(f'products must be ProductParams, got {product!r}')
+        positions.setflags(write=False)
+        if velocities is not None:
+            velocities.setflags(write=False)
+        return SpawnRequest(positions, velocities, products)
+
+    def command(self, omega: float) -> None:
+        """Queue a rotation command in rad/s; refuse a non-finite value."""
+        self.submit(RotationCommand(omega))
+
+    def spawn(self, positions: Any, velocities: Any = None,
+              products: Sequence[ProductParams] | None = None) -> None:
+        """Queue pieces at world positions (M, 3); refuse positions outside the cone."""
+        self.submit(SpawnRequest(positions, velocities,
+                                 None if products is None else tuple(products)))
+
+    def reset(self) -> None:
+        """Queue a reset."""
+        self.submit(ResetRequest())
+
+    def reconfigure(self, drive: DriveParams | None = None,
+                    feed: FeedParams | None = None) -> None:
+        """Queue new drive and/or feed parameters."""
+        self.submit(Reconfigure(drive=drive, feed=feed))
+
+    # ------------------------------------------------------------------ the tick
+
+    def _apply(self, item: EngineInput, t0: float) -> np.ndarray:
+        """Apply one input at t0; return the ids it added."""
+        if isinstance(item, RotationCommand):
+            self._commanded = True
+            self._command = item.omega
+            self._command_time = t0
+        elif isinstance(item, SpawnRequest):
+            self._state, ids = add_particles(self._state, self._setup, item.positions,
+                                             item.velocities, item.products,
+                                             omega=self._omega)
+            return ids
+        elif isinstance(item, ResetRequest):
+            self._start(t0)
+        elif isinstance(item, Reconfigure):
+            self._drive = item.drive if item.drive is not None else self._drive
+            self._feed = item.feed if item.feed is not None else self._feed
+        return np.zeros(0, dtype=np.int64)
+
+    def _feed_pieces(self) -> np.ndarray:
+        """Drop this tick's feed pieces; return their ids."""
+        feed = self._feed
+        if feed.rate <= 0.0:
+            return np.zeros(0, dtype=np.int64)
+        rng = self._rng
+        count = int(rng.poisson(feed.rate * self._config.dt))
+        count = min(count, max(0, feed.max_pieces - self._state.count))
+        if count == 0:
+            return np.zeros(0, dtype=np.int64)
+        model = self._config.model
+        rho = np.sqrt(rng.uniform(feed.rho_min ** 2, feed.rho_max ** 2, count))
+        theta = rng.uniform(0.0, 2.0 * math.pi, count)
+        positions = np.empty((count, 3))
+        positions[:, 0] = rho * np.cos(theta)
+        positions[:, 1] = rho * np.sin(theta)
+        positions[:, 2] = model.h * (1.0 - rho / model.r) + feed.drop_height
+        default = model.product
+        sigma = math.sqrt(math.log1p(feed.mass_rel_std ** 2))
+        masses = default.m * np.exp(sigma * rng.standard_normal(count) - 0.5 * sigma * sigma)
+        masses = np.clip(masses, 1.0e-6, PRODUCT_LIMITS['m'].hi)
+        if feed.d_values:
+            d = np.asarray(feed.d_values)[rng.integers(0, len(feed.d_values), count)]
+        else:
+            d = np.full(count, default.d)
+        products = [default.with_overrides({'m': float(mi), 'd': float(di)})
+                    for mi, di in zip(masses, d)]
+        self._state, ids = add_particles(self._state, self._setup, positions,
+                                         np.zeros_like(positions), products,
+                                         omega=self._omega)
+        return ids
+
+    def _target(self, t0: float) -> tuple[float, str]:
+        """Return the clamped target omega for the tick starting at t0, and the mode."""
+        drive = self._drive
+        if not self._commanded:
+            target, mode = drive.pattern_omega(t0 - self._pattern_start), 'pattern'
+        elif drive.cmd_timeout > 0.0 and t0 - self._command_time >= drive.cmd_timeout:
+            target, mode = 0.0, 'timeout'
+        else:
+            target, mode = self._command, 'command'
+        limit = drive.max_angular_velocity
+        return min(max(target, -limit), limit), mode
+
+    def tick(self) -> TickResult:
+        """Apply the queued inputs, drop the feed, advance by dt and return the result."""
+        dt = self._config.dt
+        index = self._index
+        t0 = index * dt
+        t1 = (index + 1) * dt
+        applied = tuple(self._pending)
+        self._pending.clear()
+        spawned = []
+        was_reset = False
+        for item in applied:
+            spawned.append(self._apply(item, t0))
+            was_reset = was_reset or isinstance(item, ResetRequest)
+        feed_ids = self._feed_pieces()
+        spawned.append(feed_ids)
+        target, mode = self._target(t0)
+        profile = drive_profile(t0, t1, self._omega, target,
+                                self._drive.max_angular_acceleration)
+        # the state's time is t0 already (ticks are contiguous); make it exact
+        self._state = replace(self._state, t=t0)
+        step = advance(self._state, self._setup, profile, t1)
+        self._state = step.state
+        self._omega = profile.omega(t1)
+        self._index = index + 1
+        exits = step.exits
+        if len(exits):
+            np.add.at(self._channel_mass, exits.channel - 1, exits.mass)
+        q, qdot, _ = world_from_cone(self._state.y, self._state.angle, self._omega)
+        return TickResult(
+            index=index, t0=t0, t=t1, angle=self._state.angle, omega=self._omega,
+            target_omega=target, mode=mode, ids=self._state.ids.copy(), positions=q,
+            velocities=qdot, masses=self._state.products[:, P_M].copy(), exits=exits,
+            failures=step.failures, stats=step.stats, channel_mass=self._channel_mass.copy(),
+            applied=applied, spawned_ids=np.concatenate(spawned), feed_ids=feed_ids,
+            reset=was_reset)

@@ -1,0 +1,42 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""A scenario for the headless runner: start state, rotation table and duration, validated."""
+
+from dataclasses import dataclass
+
+from ..physics.params import ModelParams, ProductParams, SolverParams
+from ..physics.rotation import RotationProfile
+
+
+@dataclass(frozen=True)
+class ParticleSpec:
+    """One piece of a scenario: world position (m), velocity (m/s) or None, product."""
+
+    position: tuple[float, float, float]
+    velocity: tuple[float, float, float] | None
+    product: ProductParams
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario."""
+
+    duration: float
+    model: ModelParams
+    solver: SolverParams
+    rotation: RotationProfile
+    particles: tuple[ParticleSpec, ...]
+    output_interval: float = 0.01

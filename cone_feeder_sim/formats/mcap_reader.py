@@ -1,0 +1,324 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Reading run logs back, also when they are truncated or damaged, without rclpy.
+
+:func:`open_recording` reads what a replay needs to know up front (topics, types, QoS,
+metadata, time range). A complete file is read through its index (messages in log-time
+order, seeking to an offset). A file without summary and footer (the process was killed,
+the disk filled up, the copy was cut short) is read sequentially up to the first record
+that is incomplete or fails its CRC: :attr:`Recording.problem` says why, and everything
+before that point is still delivered. :class:`RecordStream` is that sequential reading on
+its own (the records of a stream in file order, up to the first unreadable one), for
+readers that want the records themselves. :func:`load_resim_plan` turns a recording of
+``sim_node`` into what re-simulation needs: the recorded parameters and the engine inputs
+by tick index.
+"""
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+import os
+from pathlib import Path
+import struct
+from typing import Any, BinaryIO
+
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Footer, McapRecord, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+
+from .mcap_writer import _READ_ERRORS
+from ..errors import RecordingError
+
+__all__ = [
+    'RecordedMessage',
+    'RecordedTopic',
+    'Recording',
+    'RecordStream',
+    'open_recording',
+]
+
+
+@dataclass(frozen=True)
+class RecordedTopic:
+    """A channel of a recording: topic, ROS type, offered QoS text and message count."""
+
+    topic: str
+    type_name: str
+    offered_qos: str
+    message_count: int
+
+
+@dataclass(frozen=True)
+class RecordedMessage:
+    """One recorded message: topic, type, log time (ns) and the serialized CDR bytes."""
+
+    topic: str
+    type_name: str
+    log_time_ns: int
+    data: bytes
+
+
+def _open(path: Path) -> BinaryIO:
+    try:
+        return open(path, 'rb')
+    except OSError as err:
+        raise RecordingError(f'cannot open the recording {str(path)!r}: '
+                             f'{err.strerror or err}') from err
+
+
+def _type_name(schema: Schema | None) -> str:
+    return schema.name if schema is not None else ''
+
+
+class RecordStream:
+    """
+    The records of an MCAP stream in file order, up to the first unreadable one.
+
+    Iterating reads from the stream's current position (the magic bytes first) with CRCs
+    checked, and stops at the end of the file or at the first record that is incomplete or
+    damaged: :attr:`error` is then what reading it raised (None while none was raised).
+    The stream's position is where reading stopped.
+    """
+
+    def __init__(self, stream: BinaryIO) -> None:
+        """Read ``stream`` (open in binary mode) when iterated."""
+        self.error: BaseException | None = None
+        self._records = StreamReader(stream, validate_crcs=True).records
+
+    def __iter__(self) -> Iterator[McapRecord]:
+        """Yield the records; a read error ends the iteration and sets :attr:`error`."""
+        while True:
+            try:
+                record = next(self._records)
+            except StopIteration:
+                return
+            except _READ_ERRORS as err:
+                self.error = err
+                return
+            yield record
+
+
+@dataclass
+class Recording:
+    """
+    What is known about a recording before its messages are read.
+
+    complete: the file has its summary and footer (it was closed properly); problem: why
+    it is incomplete or where reading failed (None while everything read fine); start_ns,
+    end_ns: log times of the first and last readable message (None when there is none).
+    """
+
+    path: Path
+    complete: bool
+    topics: dict[str, RecordedTopic]
+    metadata: dict[str, dict[str, str]]
+    start_ns: int | None
+    end_ns: int | None
+    message_count: int
+    problem: str | None = None
+    _channels: dict[int, tuple[str, str]] = field(default_factory=dict, repr=False)
+    #: Log time from which a complete file's data are damaged (None: intact as far as known).
+    _damaged_from_ns: int | None = field(default=None, repr=False)
+
+    def messages(self, topics: set[str] | None = None, start_ns: int | None = None,
+                 end_ns: int | None = None) -> Iterator[RecordedMessage]:
+        """
+        Yield the messages of ``topics`` (None: all) with start_ns <= log time <= end_ns.
+
+        Complete files: in log-time order. Incomplete files: in file order, up to the
+        first unreadable record. A read error ends the iteration and sets :attr:`problem`.
+        """
+        if self.complete:
+            yield from self._indexed(topics, start_ns, end_ns)
+        else:
+            yield from self._sequential(topics, start_ns, end_ns)
+
+    def _indexed(self, topics: set[str] | None, start_ns: int | None, end_ns: int | None
+                 ) -> Iterator[RecordedMessage]:
+        if self._damaged_from_ns is not None:
+            end_ns = (self._damaged_from_ns - 1 if end_ns is None
+                      else min(end_ns, self._damaged_from_ns - 1))
+            if start_ns is not None and start_ns > end_ns:
+                return
+        with _open(self.path) as stream:
+            reader = SeekingReader(stream, validate_crcs=True)
+            messages = reader.iter_messages(
+                topics=None if topics is None else sorted(topics), starting_at=start_ns,
+                ending_at=end_ns, log_time_order=True)
+            while True:
+                try:
+                    schema, channel, message = next(messages)
+                except StopIteration:
+                    return
+                except _READ_ERRORS as err:
+                    self.problem = f'damaged data after the messages read so far: {err!r}'
+                    return
+                yield RecordedMessage(channel.topic, _type_name(schema), message.log_time,
+                                      message.data)
+
+    def _sequential(self, topics: set[str] | None, start_ns: int | None,
+                    end_ns: int | None) -> Iterator[RecordedMessage]:
+        with _open(self.path) as stream:
+            channels: dict[int, tuple[str, str]] = {}
+            schemas: dict[int, str] = {}
+            # up to the end of the readable part (the problem is known already)
+            for record in RecordStream(stream):
+                if isinstance(record, Schema):
+                    schemas[record.id] = record.name
+                elif isinstance(record, Channel):
+                    channels[record.id] = (record.topic, schemas.get(record.schema_id, ''))
+                elif isinstance(record, Message) and record.channel_id in channels:
+                    topic, type_name = channels[record.channel_id]
+                    if topics is not None and topic not in topics:
+                        continue
+                    if start_ns is not None and record.log_time < start_ns:
+                        continue
+                    if end_ns is not None and record.log_time > end_ns:
+                        continue
+                    yield RecordedMessage(topic, type_name, record.log_time, record.data)
+
+
+def _read_complete(path: Path) -> Recording | None:
+    """Return the recording read through its summary, None when there is no usable one."""
+    with _open(path) as stream:
+        try:
+            reader = SeekingReader(stream, validate_crcs=True)
+            summary = reader.get_summary()
+            if summary is None or summary.statistics is None or not summary.chunk_indexes:
+                return None
+            metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        except (*_READ_ERRORS, OSError):  # OSError: seeking before the start of a short file
+            return None
+        damaged = _first_damaged_chunk(stream, summary.chunk_indexes)
+    stats = summary.statistics
+    channels = {}
+    topics = {}
+    for channel in summary.channels.values():
+        type_name = _type_name(summary.schemas.get(channel.schema_id))
+        channels[channel.id] = (channel.topic, type_name)
+        count = stats.channel_message_counts.get(channel.id, 0)
+        known = topics.get(channel.topic)
+        topics[channel.topic] = RecordedTopic(
+            channel.topic, type_name, channel.metadata.get('offered_qos_profiles', ''),
+            count + (known.message_count if known is not None else 0))
+    count = stats.message_count
+    start = stats.message_start_time if count else None
+    end = stats.message_end_time if count else None
+    problem = None
+    damaged_from = None
+    if damaged is not None:
+        index, reason = damaged
+        damaged_from = index.message_start_time
+        before = [c.message_end_time for c in summary.chunk_indexes
+                  if c.message_end_time < damaged_from]
+        end = max(before) if before else None
+        start = start if end is not None else None
+        problem = (f'damaged chunk at byte {index.chunk_start_offset} ({reason}): messages '
+                   f'from log time {damaged_from} ns on are not read')
+    return Recording(path, True, topics, metadata, start, end, count, problem, channels,
+                     damaged_from)
+
+
+def _first_damaged_chunk(stream: BinaryIO, indexes: list[Any]) -> tuple[Any, str] | None:
+    """
+    Return the first chunk (by log time) whose record does not match its index, and why.
+
+    Only the chunk headers are read (a few bytes each). Damage inside the compressed data
+    shows when the chunk is decompressed (its CRC or the decompressor fails).
+    """
+    damaged = []
+    for index in indexes:
+        stream.seek(index.chunk_start_offset)
+        head = stream.read(1 + 8 + 8 + 8 + 8 + 4 + 4)
+        reason = None
+        if len(head) < 41:
+            reason = 'cut short'
+        else:
+            opcode, length, start, end, size, _crc, name_length = struct.unpack('<BQQQQII', head)
+            name = stream.read(name_length) if name_length < 64 else b''
+            if opcode != 0x06 or length != index.chunk_length - 9:
+                reason = 'not a chunk record where the index points'
+            elif (start, end, size) != (
+                    index.message_start_time, index.message_end_time, index.uncompressed_size):
+                reason = 'its times or size differ from the index'
+            elif name != index.compression.encode():
+                reason = 'its compression differs from the index'
+        if reason is not None:
+            damaged.append((index, reason))
+    if not damaged:
+        return None
+    return min(damaged, key=lambda item: item[0].message_start_time)
+
+
+def _scan(path: Path) -> Recording:
+    """Read an incomplete file sequentially up to its first unreadable record."""
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, str]] = {}
+    qos: dict[str, str] = {}
+    counts: dict[str, int] = {}
+    metadata: dict[str, dict[str, str]] = {}
+    start = end = None
+    total = 0
+    problem = None
+    footer = False
+    with _open(path) as stream:
+        records = RecordStream(stream)
+        for record in records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record.name
+            elif isinstance(record, Channel):
+                channels[record.id] = (record.topic, schemas.get(record.schema_id, ''))
+                qos.setdefault(record.topic, record.metadata.get('offered_qos_profiles', ''))
+                counts.setdefault(record.topic, 0)
+            elif isinstance(record, Metadata):
+                metadata[record.name] = dict(record.metadata)
+            elif isinstance(record, Message) and record.channel_id in channels:
+                topic = channels[record.channel_id][0]
+                counts[topic] += 1
+                total += 1
+                start = record.log_time if start is None else min(start, record.log_time)
+                end = record.log_time if end is None else max(end, record.log_time)
+            elif isinstance(record, Footer):
+                footer = True
+        if records.error is not None:
+            err = records.error
+            problem = (f'at byte {stream.tell()} of {path.stat().st_size}: '
+                       f'{str(err) or type(err).__name__}')
+    if total == 0 and not channels and problem is not None:
+        raise RecordingError(f'{str(path)!r} is not a readable MCAP file: {problem}')
+    if problem is None:
+        problem = ('no summary: the writer did not finish the file' if footer else
+                   'no footer: the file ends early, the writer did not finish it')
+    else:
+        problem = ('the file was not finished (truncated, or the writer was killed) or is '
+                   f'damaged: reading stopped {problem}')
+    topics = {topic: RecordedTopic(topic, type_name, qos.get(topic, ''), counts.get(topic, 0))
+              for topic, type_name in channels.values()}
+    return Recording(path, False, topics, metadata, start, end, total, problem, channels)
+
+
+def open_recording(path: str | os.PathLike) -> Recording:
+    """
+    Open a recording: through its index when complete, else its readable beginning.
+
+    Raises RecordingError when the file cannot be opened or does not start as MCAP.
+    """
+    path = Path(path)
+    with _open(path) as stream:
+        magic = stream.read(8)
+    if magic != b'\x89MCAP0\r\n':
+        raise RecordingError(f'{str(path)!r} is not an MCAP file (wrong magic bytes)')
+    recording = _read_complete(path)
+    return recording if recording is not None else _scan(path)

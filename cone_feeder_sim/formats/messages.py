@@ -1,0 +1,257 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The simulator's topics and messages, built without rclpy.
+
+Both the ROS 2 node (:mod:`cone_feeder_sim.sim_node`) and the headless runner's MCAP output
+(``cone-feeder-sim run ... --mcap``) build their messages here, so a live run and a batch
+run carry the same topics, types, QoS and point layouts. Messages are plain mappings that
+:mod:`cone_feeder_sim.cdr` encodes; arrays are numpy arrays.
+
+:data:`TOPICS` lists every topic with its type and offered QoS (as
+:class:`~cone_feeder_sim.recording.QosProfile`, which the node converts to rclpy's profile
+and the recorder writes into the channel metadata).
+"""
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .cdr import CdrCodec, default_codec
+from .pointcloud import EXIT_DTYPE, point_fields, STATE_DTYPE
+from ..physics.params import ModelParams
+from ..physics.simulation import ExitEvents
+
+__all__ = [
+    'MarkerBuilder',
+    'MarkerSchedule',
+    'channel_mass_message',
+    'clock_message',
+    'cone_state_message',
+    'exits_message',
+    'header',
+    'particles_message',
+    'stamp',
+    'stamp_ns',
+    'states_message',
+]
+
+# --------------------------------------------------------------------------- topics
+
+
+# --------------------------------------------------------------------------- point layouts
+
+# --------------------------------------------------------------------------- messages
+
+
+def stamp(t: float) -> dict[str, int]:
+    """Return a builtin_interfaces/Time mapping of t (s), rounded to the nanosecond."""
+    ns = int(round(t * 1e9))
+    sec, nanosec = divmod(ns, 1_000_000_000)
+    return {'sec': sec, 'nanosec': nanosec}
+
+
+def stamp_ns(t: float) -> int:
+    """Return t (s) in integer nanoseconds, rounded as :func:`stamp` rounds."""
+    return int(round(t * 1e9))
+
+
+def header(t: float, frame_id: str) -> dict[str, Any]:
+    """Return a std_msgs/Header mapping stamped with t (s)."""
+    return {'stamp': stamp(t), 'frame_id': frame_id}
+
+
+def clock_message(t: float) -> dict[str, Any]:
+    """Return a rosgraph_msgs/Clock mapping of t (s)."""
+    return {'clock': stamp(t)}
+
+
+def particles_message(head: dict[str, Any], positions: np.ndarray) -> dict[str, Any]:
+    """Return a geometry_msgs/PoseArray of positions (N, 3) with identity orientations."""
+    n = positions.shape[0]
+    poses = np.zeros((n, 7))
+    poses[:, 0:3] = positions
+    poses[:, 6] = 1.0
+    return {'header': head, 'poses': poses}
+
+
+def _cloud(head: dict[str, Any], points: np.ndarray) -> dict[str, Any]:
+    step = points.dtype.itemsize
+    return {'header': head, 'height': 1, 'width': points.shape[0],
+            'fields': point_fields(points.dtype), 'is_bigendian': False,
+            'point_step': step, 'row_step': step * points.shape[0], 'data': points,
+            'is_dense': True}
+
+
+def states_message(head: dict[str, Any], ids: np.ndarray, positions: np.ndarray,
+                   velocities: np.ndarray, masses: np.ndarray) -> dict[str, Any]:
+    """Return the particle_states PointCloud2 (layout :data:`STATE_DTYPE`)."""
+    points = np.zeros(ids.shape[0], dtype=STATE_DTYPE)
+    for i, name in enumerate(('x', 'y', 'z')):
+        points[name] = positions[:, i]
+        points['v' + name] = velocities[:, i]
+    points['id'] = ids & 0xFFFFFFFF
+    points['mass'] = masses
+    return _cloud(head, points)
+
+
+def exits_message(head: dict[str, Any], exits: ExitEvents) -> dict[str, Any]:
+    """Return the exit_events PointCloud2 (layout :data:`EXIT_DTYPE`)."""
+    rows = np.zeros(len(exits), dtype=EXIT_DTYPE)
+    for i, name in enumerate(('x', 'y', 'z')):
+        rows[name] = exits.position[:, i]
+        rows['v' + name] = exits.velocity[:, i]
+    rows['exit_time'] = exits.t
+    rows['angle'] = np.arctan2(exits.position[:, 1], exits.position[:, 0])
+    rows['mass'] = exits.mass
+    rows['id'] = exits.ids & 0xFFFFFFFF
+    rows['channel'] = exits.channel
+    return _cloud(head, rows)
+
+
+def channel_mass_message(channel_mass: np.ndarray) -> dict[str, Any]:
+    """Return the std_msgs/Float64MultiArray of the cumulative mass per channel (kg)."""
+    count = channel_mass.shape[0]
+    return {'layout': {'dim': [{'label': 'channel', 'size': count, 'stride': count}],
+                       'data_offset': 0},
+            'data': channel_mass}
+
+
+def cone_state_message(head: dict[str, Any], angle: float, omega: float) -> dict[str, Any]:
+    """Return the sensor_msgs/JointState of the cone: angle (rad) and omega (rad/s)."""
+    return {'header': head, 'name': ['cone'], 'position': np.array([angle]),
+            'velocity': np.array([omega]), 'effort': np.zeros(0)}
+
+
+# --------------------------------------------------------------------------- markers
+
+
+def _color(r: float, g: float, b: float, a: float = 1.0) -> dict[str, float]:
+    return {'r': r, 'g': g, 'b': b, 'a': a}
+
+
+class MarkerSchedule:
+    """
+    When to publish markers: ``rate`` messages per simulated second, and on a reset.
+
+    After a reset the next tick publishes markers as well (:meth:`restart`).
+    """
+
+    def __init__(self, rate: float) -> None:
+        """Start with no markers published yet."""
+        self.rate = float(rate)
+        self._last_t = -math.inf
+
+    def due(self, t: float, reset: bool = False) -> bool:
+        """Tell whether markers are due at simulation time t (s); if so, count them sent."""
+        if self.rate > 0.0 and (t - self._last_t >= 1.0 / self.rate - 1e-9 * t or reset):
+            self._last_t = t
+            return True
+        return False
+
+    def restart(self) -> None:
+        """Make the next call of :meth:`due` true (after a reset)."""
+        self._last_t = -math.inf
+
+
+class MarkerBuilder:
+    """The visualization_msgs/MarkerArray of the scene: static cone and channels, pieces."""
+
+    def __init__(self, model: ModelParams, frame_id: str, codec: CdrCodec | None = None
+                 ) -> None:
+        """Build the static markers of the model once."""
+        self._model = model
+        self._frame = frame_id
+        self._codec = codec if codec is not None else default_codec()
+        self.static = self._build_static()
+
+    def _marker(self, ns: str, marker_id: int, marker_type: int, **fields: Any
+                ) -> dict[str, Any]:
+        marker = self._codec.default_message('visualization_msgs/msg/Marker')
+        marker['header'] = {'stamp': {'sec': 0, 'nanosec': 0}, 'frame_id': self._frame}
+        marker['ns'] = ns
+        marker['id'] = marker_id
+        marker['type'] = marker_type
+        marker['pose']['orientation']['w'] = 1.0
+        marker['scale'] = {'x': 1.0, 'y': 1.0, 'z': 1.0}
+        marker['color'] = _color(1.0, 1.0, 1.0)
+        marker.update(fields)
+        return marker
+
+    def _build_static(self) -> list[dict[str, Any]]:
+        """Return the cone surface, the channel sectors and their labels."""
+        model = self._model
+        r, h = model.r, model.h
+        segments = 96
+        angles = np.linspace(0.0, 2.0 * math.pi, segments + 1)
+        tri = np.zeros((segments * 3, 3))
+        tri[0::3] = (0.0, 0.0, h)
+        tri[1::3, 0] = r * np.cos(angles[:-1])
+        tri[1::3, 1] = r * np.sin(angles[:-1])
+        tri[2::3, 0] = r * np.cos(angles[1:])
+        tri[2::3, 1] = r * np.sin(angles[1:])
+        markers = [self._marker('cone', 0, 11, points=tri,  # TRIANGLE_LIST
+                                color=_color(0.7, 0.72, 0.75, 0.8))]
+        channels = model.channels
+        ring = []
+        colors = []
+        labels = []
+        sub = 8
+        for channel in range(1, channels.count + 1):
+            start, end = (math.radians(a) for a in channels.sector_edges(channel))
+            edge = np.linspace(start, end, sub + 1)
+            shade = (0.25, 0.55, 0.85, 0.9) if channel % 2 else (0.95, 0.75, 0.2, 0.9)
+            for a0, a1 in zip(edge[:-1], edge[1:]):
+                inner0 = (r * math.cos(a0), r * math.sin(a0), 0.0)
+                inner1 = (r * math.cos(a1), r * math.sin(a1), 0.0)
+                outer0 = (1.15 * r * math.cos(a0), 1.15 * r * math.sin(a0), 0.0)
+                outer1 = (1.15 * r * math.cos(a1), 1.15 * r * math.sin(a1), 0.0)
+                ring += [inner0, outer0, outer1, inner0, outer1, inner1]
+                colors += [shade] * 6
+            mid = 0.5 * (start + end)
+            labels.append(self._marker(
+                'channel_labels', channel, 9,  # TEXT_VIEW_FACING
+                pose={'position': {'x': 1.25 * r * math.cos(mid), 'y': 1.25 * r * math.sin(mid),
+                                   'z': 0.01},
+                      'orientation': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0}},
+                scale={'x': 0.0, 'y': 0.0, 'z': 0.03}, text=str(channel)))
+        markers.append(self._marker('channels', 0, 11, points=np.array(ring),
+                                    colors=np.array(colors, dtype=np.float32)))
+        return markers + labels
+
+    def dynamic(self, head: dict[str, Any], angle: float, positions: np.ndarray
+                ) -> list[dict[str, Any]]:
+        """Return the pieces and a line that turns with the cone."""
+        model = self._model
+        c, s = math.cos(angle), math.sin(angle)
+        line = np.array([[0.0, 0.0, model.h + 0.002], [model.r * c, model.r * s, 0.002]])
+        marker_line = self._marker('cone_angle', 0, 5, header=head,  # LINE_LIST
+                                   points=line, scale={'x': 0.004, 'y': 0.0, 'z': 0.0},
+                                   color=_color(0.1, 0.1, 0.1))
+        size = 2.0 * model.product.s0
+        if positions.shape[0]:
+            pieces = self._marker('pieces', 0, 7, header=head,  # SPHERE_LIST
+                                  points=positions,
+                                  scale={'x': size, 'y': size, 'z': size},
+                                  color=_color(0.85, 0.25, 0.25))
+        else:
+            pieces = self._marker('pieces', 0, 7, header=head, action=2)  # DELETE
+        return [marker_line, pieces]
+
+    def message(self, head: dict[str, Any], angle: float, positions: np.ndarray
+                ) -> dict[str, Any]:
+        """Return the whole scene: static markers, pieces and the cone angle line."""
+        return {'markers': self.static + self.dynamic(head, angle, positions)}

@@ -1,0 +1,145 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Scenario files for the headless runner: validated before anything runs.
+
+A scenario is a YAML mapping::
+
+    duration: 4.0                 # s
+    parameters: table2.yaml       # optional parameter file (relative to the scenario)
+    model: {d: 225.0}             # optional overrides of the parameter file, same keys
+    solver: {rtol: 1.0e-5}        # optional integrator settings
+    output_interval: 0.01         # s, optional: interval of progress and trajectory output
+    rotation: [[0.0, 0.0], [0.4, -10.47]]   # [t s, omega rad/s]; linear between, held after
+    particles:
+      - position: [0.11, -0.01, 0.03]      # m, world frame
+        velocity: [0.0, 0.0, 0.0]          # optional; default: moving with the cone surface
+        on_surface: false                  # optional; true: z set to the resting height
+        d: 225.0                           # optional per-particle product overrides
+
+Every problem is reported with its location (e.g. `particles[2].position`).
+"""
+
+from collections.abc import Mapping
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .parameter_file import load_model_params, read_yaml
+from ..errors import ConeFeederError, ScenarioError
+from ..feeder.scenario import ParticleSpec, Scenario
+from ..physics.params import PRODUCT_LIMITS, solver_params_from_mapping
+from ..physics.rotation import RotationProfile
+from ..physics.simulation import check_positions, resting_height
+
+SCENARIO_KEYS = ('duration', 'parameters', 'model', 'solver', 'output_interval', 'rotation',
+                 'particles')
+PARTICLE_KEYS = ('position', 'velocity', 'on_surface')
+
+
+def _vector(where: str, value: Any) -> tuple[float, float, float]:
+    if (not isinstance(value, (list, tuple)) or len(value) != 3
+            or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
+        raise ScenarioError(f'{where} must be a list of 3 numbers, got {value!r}')
+    vec = tuple(float(v) for v in value)
+    if not all(math.isfinite(v) for v in vec):
+        raise ScenarioError(f'{where} must be finite, got {list(vec)}')
+    return vec  # type: ignore[return-value]
+
+
+def _positive(where: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            math.isfinite(value) and value > 0):
+        raise ScenarioError(f'{where} must be a positive number of seconds, got {value!r}')
+    return float(value)
+
+
+def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenario:
+    """Validate a parsed scenario and return it; raise ScenarioError naming the problem."""
+    if not isinstance(content, Mapping):
+        raise ScenarioError('a scenario must be a mapping with keys duration, rotation, '
+                            'particles')
+    unknown = sorted(str(k) for k in set(content) - set(SCENARIO_KEYS))
+    if unknown:
+        raise ScenarioError(f'unknown scenario key(s) {", ".join(map(repr, unknown))}; '
+                            f'known: {", ".join(SCENARIO_KEYS)}')
+    for key in ('duration', 'rotation', 'particles'):
+        if key not in content:
+            raise ScenarioError(f'scenario is missing the key {key!r}')
+    duration = _positive('duration', content['duration'])
+    interval = _positive('output_interval', content.get('output_interval', 0.01))
+    overrides = content.get('model') or {}
+    if not isinstance(overrides, Mapping):
+        raise ScenarioError(f'model must be a mapping of parameter overrides, got {overrides!r}')
+    param_file = content.get('parameters')
+    if param_file is not None:
+        param_file = Path(str(param_file))
+        if not param_file.is_absolute() and base_dir is not None:
+            param_file = base_dir / param_file
+    try:
+        model = load_model_params(param_file, overrides)
+        solver = solver_params_from_mapping(content.get('solver'))
+        rotation = RotationProfile.from_table(content['rotation'])
+    except ConeFeederError as exc:
+        raise ScenarioError(str(exc)) from exc
+    raw_particles = content['particles']
+    if not isinstance(raw_particles, list) or not raw_particles:
+        raise ScenarioError('particles must be a non-empty list of pieces')
+    particles = []
+    for i, raw in enumerate(raw_particles):
+        where = f'particles[{i}]'
+        if not isinstance(raw, Mapping):
+            raise ScenarioError(f'{where} must be a mapping with at least a position')
+        extra = sorted(str(k) for k in set(raw) - set(PARTICLE_KEYS) - set(PRODUCT_LIMITS))
+        if extra:
+            raise ScenarioError(f'{where}: unknown key(s) {", ".join(map(repr, extra))}')
+        if 'position' not in raw:
+            raise ScenarioError(f'{where} has no position')
+        position = _vector(f'{where}.position', raw['position'])
+        velocity = (_vector(f'{where}.velocity', raw['velocity'])
+                    if raw.get('velocity') is not None else None)
+        try:
+            product = model.product.with_overrides(
+                {k: v for k, v in raw.items() if k in PRODUCT_LIMITS})
+        except ConeFeederError as exc:
+            raise ScenarioError(f'{where}: {exc}') from exc
+        on_surface = raw.get('on_surface', False)
+        if not isinstance(on_surface, bool):
+            raise ScenarioError(f'{where}.on_surface must be true or false')
+        if on_surface:
+            position = (position[0], position[1],
+                        resting_height(model, product, position[0], position[1]))
+        try:
+            check_positions(model, np.array([position]))
+        except ScenarioError as exc:
+            raise ScenarioError(f'{where}: {exc}') from exc
+        particles.append(ParticleSpec(position=position, velocity=velocity, product=product))
+    return Scenario(duration=duration, model=model, solver=solver, rotation=rotation,
+                    particles=tuple(particles), output_interval=interval)
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario file."""
+    path = Path(path)
+    try:
+        content = read_yaml(path)
+    except ConeFeederError as exc:
+        raise ScenarioError(str(exc)) from exc
+    try:
+        return scenario_from_mapping(content, base_dir=path.parent)
+    except ScenarioError as exc:
+        raise ScenarioError(f'{path}: {exc}') from exc

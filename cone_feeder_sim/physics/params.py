@@ -1,0 +1,416 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Validated, immutable parameters of the model (Table II of the paper) and of the solver.
+
+Values are SI (m, s, kg, N, rad) apart from the cone tilt and the channel boundary, which
+are given in degrees at the configuration edge. Every value is checked once, here, when a
+parameter object is built from a mapping; the physics core trusts what it receives.
+
+Product parameters (mass, damping, friction, contact) belong to each piece, so one run can
+mix products: :class:`ProductParams` holds one product, and the simulator stores one row of
+:func:`product_row` per particle.
+"""
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
+import math
+from typing import Any
+
+import numpy as np
+
+from ..errors import ParameterError
+
+
+@dataclass(frozen=True)
+class Limit:
+    """Allowed range of one numeric parameter; bounds are inclusive unless marked open."""
+
+    lo: float
+    hi: float
+    unit: str
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def describe(self) -> str:
+        """Return the range in interval notation with its unit, e.g. '(0, 10] kg'."""
+        left = '(' if self.lo_open else '['
+        right = ')' if self.hi_open else ']'
+        unit = f' {self.unit}' if self.unit else ''
+        return f'{left}{self.lo:g}, {self.hi:g}{right}{unit}'
+
+    def contains(self, value: float) -> bool:
+        """Tell whether a finite value lies in the range."""
+        above = value > self.lo if self.lo_open else value >= self.lo
+        below = value < self.hi if self.hi_open else value <= self.hi
+        return above and below
+
+
+def check_number(key: str, value: Any, limit: Limit) -> float:
+    """Return value as float after checking type, finiteness and range; name key on failure."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ParameterError(
+            f'parameter {key!r} must be a number in {limit.describe()}, '
+            f'got {type(value).__name__} {value!r}')
+    number = float(value)
+    if not math.isfinite(number):
+        raise ParameterError(
+            f'parameter {key!r} must be finite, in {limit.describe()}, got {number!r}')
+    if not limit.contains(number):
+        raise ParameterError(
+            f'parameter {key!r} = {number:g} is out of range: allowed {limit.describe()}')
+    return number
+
+
+def check_integer(key: str, value: Any, limit: Limit) -> int:
+    """
+    Return value as int after checking it is an integer in range; name key on failure.
+
+    Integers are compared exactly (never through float), so a seed of 2**53 + 1 stays
+    itself.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ParameterError(
+            f'parameter {key!r} must be an integer in {limit.describe()}, '
+            f'got {type(value).__name__} {value!r}')
+    number = int(value)
+    if not limit.contains(number):
+        raise ParameterError(
+            f'parameter {key!r} = {number} is out of range: allowed {limit.describe()}')
+    return number
+
+
+def check_choice(key: str, value: Any, choices: tuple[str, ...]) -> str:
+    """Return value after checking it is one of the allowed strings."""
+    if not isinstance(value, str) or value not in choices:
+        raise ParameterError(
+            f'parameter {key!r} must be one of {", ".join(choices)}; got {value!r}')
+    return value
+
+
+#: Ranges of the per-piece product parameters (keys named after the paper's symbols).
+PRODUCT_LIMITS: dict[str, Limit] = {
+    'm': Limit(0.0, 100.0, 'kg', lo_open=True),
+    'd': Limit(0.0, 1.0e5, 'N*s/m'),
+    'mu_C': Limit(0.0, 10.0, ''),
+    'mu_S': Limit(0.0, 10.0, ''),
+    'v_C': Limit(0.0, 10.0, 'm/s', lo_open=True),
+    'v_S': Limit(0.0, 10.0, 'm/s', lo_open=True),
+    'T_F': Limit(0.0, 10.0, 's', lo_open=True),
+    'qdot_F': Limit(0.0, 10.0, 'm/s', lo_open=True),
+    's0': Limit(0.0, 0.5, 'm', lo_open=True),
+    's_c_ratio': Limit(0.0, 1.0, '', lo_open=True, hi_open=True),
+    'r_a': Limit(0.0, 1.0, '', lo_open=True, hi_open=True),
+    'r_d': Limit(0.0, 1.0e6, 's/m', lo_open=True),
+    'r_f': Limit(0.0, 1.0e6, 'N', lo_open=True),
+}
+
+#: Ranges of the machine and model parameters shared by all pieces.
+MODEL_LIMITS: dict[str, Limit] = {
+    'g': Limit(0.0, 100.0, 'm/s^2'),
+    'cone_diameter': Limit(0.0, 20.0, 'm', lo_open=True),
+    'cone_tilt': Limit(0.0, 60.0, 'deg'),
+    'epsilon': Limit(0.0, 1.0, 'm/s', lo_open=True),
+    'tip_epsilon': Limit(0.0, 0.1, 'm', lo_open=True),
+    'channel_count': Limit(1, 360, ''),
+    'channel_boundary': Limit(-360.0, 360.0, 'deg'),
+}
+
+#: Ranges of the integrator settings (SolverParams).
+SOLVER_LIMITS: dict[str, Limit] = {
+    'rtol': Limit(0.0, 1.0, '', lo_open=True),
+    'atol_position': Limit(0.0, 1.0, 'm', lo_open=True),
+    'atol_velocity': Limit(0.0, 10.0, 'm/s', lo_open=True),
+    'atol_force': Limit(0.0, 1.0e3, 'N', lo_open=True),
+    'h_init': Limit(0.0, 1.0, 's', lo_open=True),
+    'h_min': Limit(0.0, 1.0e-3, 's', lo_open=True),
+    'h_max': Limit(0.0, 10.0, 's', lo_open=True),
+    'max_steps': Limit(1, 10 ** 12, ''),
+}
+
+NORMAL_FORCE_CHOICES = ('newton', 'literal')
+FRICTION_DIRECTION_CHOICES = ('full', 'tangential')
+CHANNEL_NUMBERING_CHOICES = ('clockwise', 'counter_clockwise')
+
+
+@dataclass(frozen=True)
+class ProductParams:
+    """
+    Parameters of one product (one kind of piece).
+
+    Attributes (units): m (kg) mass; d (N*s/m) viscous damping; mu_C sliding and mu_S
+    adhesive friction coefficients; v_C (m/s) Coulomb zero-crossing slope; v_S (m/s) velocity
+    of maximum adhesion, the paper's v-hat_S; T_F (s) friction filter time constant; qdot_F
+    (m/s) filter adaptation velocity of eq. 14; s0 (m) outer radius; s_c_ratio = s_c / s0;
+    r_a activation at the compression radius; r_d (s/m) dissipation coefficient;
+    r_f (N) maximum constraint force.
+    """
+
+    m: float = 0.125
+    d: float = 225.0
+    mu_C: float = 0.85
+    mu_S: float = 0.99
+    v_C: float = 5.0e-5
+    v_S: float = 0.1
+    T_F: float = 3.0e-4
+    qdot_F: float = 1.0e-4
+    s0: float = 0.025
+    s_c_ratio: float = 0.5
+    r_a: float = 0.99
+    r_d: float = 120.0
+    r_f: float = 120.0
+
+    def __post_init__(self) -> None:
+        """Validate every field against :data:`PRODUCT_LIMITS`."""
+        for key, limit in PRODUCT_LIMITS.items():
+            object.__setattr__(self, key, check_number(key, getattr(self, key), limit))
+
+    @property
+    def s_c(self) -> float:
+        """Return the compression radius in m, the paper's s_c."""
+        return self.s_c_ratio * self.s0
+
+    @property
+    def r_t(self) -> float:
+        """Return the transition coefficient in 1/m, the paper's r_t of eq. 32."""
+        return 2.0 * math.atanh(self.r_a) / (self.s0 - self.s_c)
+
+    @property
+    def r_c(self) -> float:
+        """Return the constraint offset in m, the paper's r_c of eq. 33."""
+        return 0.5 * (self.s0 + self.s_c)
+
+    def with_overrides(self, overrides: Mapping[str, Any]) -> 'ProductParams':
+        """Return a copy with some fields replaced; unknown keys are refused by name."""
+        unknown = sorted(set(overrides) - set(PRODUCT_LIMITS))
+        if unknown:
+            raise ParameterError(
+                f'unknown product parameter(s) {", ".join(map(repr, unknown))}; '
+                f'known: {", ".join(PRODUCT_LIMITS)}')
+        return replace(self, **dict(overrides))
+
+
+# Column layout of one row of the per-particle product array used by the kernel.
+P_M, P_D, P_MU_C, P_MU_S, P_V_C, P_V_S, P_T_F, P_QDOT_F = range(8)
+P_S0, P_SC_RATIO, P_R_A, P_R_D, P_R_F, P_R_T, P_R_C, P_C_S = range(8, 16)
+PRODUCT_WIDTH = 16
+
+
+def product_row(product: ProductParams) -> np.ndarray:
+    """
+    Return the kernel's row for one product, shape (PRODUCT_WIDTH,), float64.
+
+    Columns 0..12 are the fields of :class:`ProductParams` in declaration order; then r_t
+    (1/m, eq. 32), r_c (m, eq. 33) and c_S = mu_S - mu_C*tanh(v_S/v_C), the coefficient of
+    the normal force in F_S^Delta (eq. 10).
+    """
+    base = [float(getattr(product, f.name)) for f in fields(product)]
+    c_s = product.mu_S - product.mu_C * math.tanh(product.v_S / product.v_C)
+    return np.array(base + [product.r_t, product.r_c, c_s], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class ChannelLayout:
+    """
+    Dosing channels around the cone edge.
+
+    `count` equal sectors; channel 1 starts at `boundary` (deg) and channels are numbered
+    in the direction `numbering` seen from above. With the default (14, 108 deg, clockwise)
+    channel 1 covers [82.29 deg, 108 deg), which reproduces Table I.
+    """
+
+    count: int = 14
+    boundary: float = 108.0
+    numbering: str = 'clockwise'
+
+    def __post_init__(self) -> None:
+        """Validate the layout."""
+        count = self.count
+        if isinstance(count, bool) or not isinstance(count, (int, np.integer)):
+            raise ParameterError(
+                f"parameter 'channel_count' must be an integer in "
+                f"{MODEL_LIMITS['channel_count'].describe()}, got {count!r}")
+        check_number('channel_count', count, MODEL_LIMITS['channel_count'])
+        object.__setattr__(self, 'count', int(count))
+        object.__setattr__(self, 'boundary', check_number(
+            'channel_boundary', self.boundary, MODEL_LIMITS['channel_boundary']))
+        check_choice('channel_numbering', self.numbering, CHANNEL_NUMBERING_CHOICES)
+
+    @property
+    def width(self) -> float:
+        """Angular width of one channel (deg)."""
+        return 360.0 / self.count
+
+    def channel_of(self, angle_deg: Any) -> np.ndarray:
+        """
+        Return the 1-based channel of exit angles.
+
+        angle_deg: array-like (any shape) of angles atan2(y, x) in degrees (any branch).
+        Returns an int64 array of the same shape, values in 1..count.
+        """
+        angle = np.asarray(angle_deg, dtype=np.float64)
+        offset = np.mod(angle - self.boundary, 360.0)
+        sector = np.floor(offset / self.width).astype(np.int64)
+        sector = np.clip(sector, 0, self.count - 1)
+        if self.numbering == 'clockwise':
+            return self.count - sector
+        return sector + 1
+
+    def sector_edges(self, channel: int) -> tuple[float, float]:
+        """Return (start, end) angles in degrees, counter-clockwise order, of a channel."""
+        if not 1 <= channel <= self.count:
+            raise ParameterError(f'channel {channel} is not in 1..{self.count}')
+        if self.numbering == 'clockwise':
+            start = self.boundary - channel * self.width
+        else:
+            start = self.boundary + (channel - 1) * self.width
+        return start, start + self.width
+
+
+# Layout of the global (machine and model) array used by the kernel.
+G_R, G_H, G_K, G_G, G_EPS, G_TIP_EPS, G_LITERAL, G_TANGENTIAL = range(8)
+GLOBAL_WIDTH = 8
+
+
+@dataclass(frozen=True)
+class ModelParams:
+    """
+    Machine geometry, model constants and model options, plus the default product.
+
+    g (m/s^2); cone_diameter (m); cone_tilt (deg); epsilon (m/s) of eq. 4; tip_epsilon (m)
+    regularises rho near the cone tip, rho = sqrt(x^2 + y^2 + tip_epsilon^2);
+    normal_force: 'newton' (N = R_a*F_c in friction, default) or 'literal' (N/r_f);
+    friction_direction: 'full' (3-D v_dif, default) or 'tangential' (normal part removed).
+    """
+
+    product: ProductParams = ProductParams()
+    g: float = 9.81
+    cone_diameter: float = 0.45
+    cone_tilt: float = 7.5
+    epsilon: float = 1.0e-7
+    tip_epsilon: float = 1.0e-4
+    normal_force: str = 'newton'
+    friction_direction: str = 'full'
+    channels: ChannelLayout = ChannelLayout()
+
+    def __post_init__(self) -> None:
+        """Validate every field."""
+        for key in ('g', 'cone_diameter', 'cone_tilt', 'epsilon', 'tip_epsilon'):
+            object.__setattr__(self, key, check_number(key, getattr(self, key),
+                                                       MODEL_LIMITS[key]))
+        check_choice('normal_force', self.normal_force, NORMAL_FORCE_CHOICES)
+        check_choice('friction_direction', self.friction_direction,
+                     FRICTION_DIRECTION_CHOICES)
+
+    @property
+    def r(self) -> float:
+        """Return the cone radius in m."""
+        return 0.5 * self.cone_diameter
+
+    @property
+    def h(self) -> float:
+        """Cone height h = r*tan(tilt) (m)."""
+        return self.r * math.tan(math.radians(self.cone_tilt))
+
+    def global_row(self) -> np.ndarray:
+        """Return the kernel's global array, shape (GLOBAL_WIDTH,), float64."""
+        row = np.zeros(GLOBAL_WIDTH, dtype=np.float64)
+        row[G_R] = self.r
+        row[G_H] = self.h
+        row[G_K] = self.h / self.r
+        row[G_G] = self.g
+        row[G_EPS] = self.epsilon
+        row[G_TIP_EPS] = self.tip_epsilon
+        row[G_LITERAL] = 1.0 if self.normal_force == 'literal' else 0.0
+        row[G_TANGENTIAL] = 1.0 if self.friction_direction == 'tangential' else 0.0
+        return row
+
+
+MODEL_KEYS = ('g', 'cone_diameter', 'cone_tilt', 'epsilon', 'tip_epsilon', 'normal_force',
+              'friction_direction')
+CHANNEL_KEYS = {'channel_count': 'count', 'channel_boundary': 'boundary',
+                'channel_numbering': 'numbering'}
+
+
+def model_params_from_mapping(mapping: Mapping[str, Any],
+                              base: ModelParams | None = None) -> ModelParams:
+    """
+    Build validated :class:`ModelParams` from a flat mapping of parameter-file keys.
+
+    Keys are those of the parameter file (product keys, model keys and channel keys); keys
+    missing from the mapping keep their value in `base` (Table II by default). Unknown keys
+    and invalid values raise :class:`ParameterError` naming the key.
+    """
+    base = base if base is not None else ModelParams()
+    if not isinstance(mapping, Mapping):
+        raise ParameterError(f'parameters must be a mapping of key: value, got {mapping!r}')
+    known = set(PRODUCT_LIMITS) | set(MODEL_KEYS) | set(CHANNEL_KEYS)
+    unknown = sorted(str(k) for k in set(mapping) - known)
+    if unknown:
+        raise ParameterError(
+            f'unknown parameter(s) {", ".join(map(repr, unknown))}; known: '
+            f'{", ".join(sorted(known))}')
+    product = base.product.with_overrides(
+        {k: v for k, v in mapping.items() if k in PRODUCT_LIMITS})
+    channels = replace(base.channels, **{CHANNEL_KEYS[k]: v for k, v in mapping.items()
+                                         if k in CHANNEL_KEYS})
+    model = {k: v for k, v in mapping.items() if k in MODEL_KEYS}
+    return replace(base, product=product, channels=channels, **model)
+
+
+@dataclass(frozen=True)
+class SolverParams:
+    """
+    Tolerances and limits of the adaptive Rosenbrock integrator.
+
+    rtol: relative tolerance; atol_position (m), atol_velocity (m/s), atol_force (N):
+    absolute tolerances of the three blocks of the state; h_init (s) first trial step, and
+    the largest step tried right after a jump of the cone's angular acceleration;
+    h_min (s) smallest step before a particle is declared failed; h_max (s) longest step
+    (a stick-slip transition starting inside a longer step can escape the error estimate);
+    max_steps: accepted plus rejected steps allowed per particle and call.
+    """
+
+    rtol: float = 1.0e-5
+    atol_position: float = 1.0e-6
+    atol_velocity: float = 1.0e-5
+    atol_force: float = 1.0e-4
+    h_init: float = 1.0e-5
+    h_min: float = 1.0e-12
+    h_max: float = 0.01
+    max_steps: int = 1_000_000
+
+    def __post_init__(self) -> None:
+        """Validate every field."""
+        for key, limit in SOLVER_LIMITS.items():
+            if key == 'max_steps':
+                object.__setattr__(self, key, check_integer(key, self.max_steps, limit))
+            else:
+                object.__setattr__(self, key, check_number(key, getattr(self, key), limit))
+
+    def atol_row(self) -> np.ndarray:
+        """Return the absolute tolerance per state component, shape (9,)."""
+        return np.repeat([self.atol_position, self.atol_velocity, self.atol_force], 3)
+
+
+def solver_params_from_mapping(mapping: Mapping[str, Any] | None) -> SolverParams:
+    """Build validated solver settings; unknown keys are refused by name."""
+    mapping = dict(mapping or {})
+    known = set(SolverParams.__dataclass_fields__)
+    unknown = sorted(set(mapping) - known)
+    if unknown:
+        raise ParameterError(f'unknown solver setting(s) {", ".join(map(repr, unknown))}; '
+                             f'known: {", ".join(sorted(known))}')
+    return SolverParams(**mapping)

@@ -1,0 +1,367 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Simulation state over many particles and the pure function that advances it.
+
+:class:`SimState` holds the changing state as arrays over N particles; :class:`Setup` holds
+the immutable parameters (validated once). :func:`advance` is pure: it returns a new state
+and the events of the interval, and never mutates its inputs. :class:`Simulator` is a small
+mutable convenience wrapper used by the headless runner and the ROS node.
+
+Positions and velocities at this interface are in the world frame (z up, origin at the
+centre of the cone base); the integrator works in cone axes (see cone_feeder_sim.model).
+"""
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+import math
+
+import numpy as np
+
+from .integrator import (
+    ACTIVE, advance_batch, EXITED, FAILED, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW,
+    REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED, STAT_WIDTH)
+from .model import STATE_SIZE
+from .params import ModelParams, P_M, product_row, PRODUCT_WIDTH, ProductParams, SolverParams
+from .rotation import rotate_z, RotationProfile
+from ..errors import ScenarioError
+
+FAILURE_REASONS = {
+    REASON_STEP_UNDERFLOW: 'step size fell below h_min',
+    REASON_TOO_MANY_STEPS: 'more than max_steps steps in one interval',
+    REASON_NOT_FINITE: 'the state or its derivatives became non-finite',
+}
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Immutable parameters of a run, with the kernel arrays derived from them once."""
+
+    model: ModelParams = ModelParams()
+    solver: SolverParams = SolverParams()
+    global_row: np.ndarray = field(init=False, repr=False)
+    atol: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        """Derive the kernel arrays."""
+        gp = self.model.global_row()
+        atol = self.solver.atol_row()
+        gp.setflags(write=False)
+        atol.setflags(write=False)
+        object.__setattr__(self, 'global_row', gp)
+        object.__setattr__(self, 'atol', atol)
+
+
+@dataclass(frozen=True)
+class SimState:
+    """
+    State of all particles at time t.
+
+    t (s); angle (rad) the cone angle phi(t); y (N, 9) [x (m), w (m/s), P (N)] in cone axes;
+    products (N, PRODUCT_WIDTH) product rows; ids (N,) int64 unique particle ids;
+    h (N,) proposed next step sizes (s); next_id the id the next new particle gets.
+    """
+
+    t: float = 0.0
+    angle: float = 0.0
+    y: np.ndarray = field(default_factory=lambda: np.zeros((0, STATE_SIZE)))
+    products: np.ndarray = field(default_factory=lambda: np.zeros((0, PRODUCT_WIDTH)))
+    ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    h: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    next_id: int = 0
+
+    @property
+    def count(self) -> int:
+        """Return the number of particles on the cone."""
+        return int(self.ids.shape[0])
+
+
+@dataclass(frozen=True)
+class ExitEvents:
+    """
+    Pieces that left the cone during an interval, one entry per piece.
+
+    ids (M,); t (M,) exit times (s); angle_deg (M,) atan2(y, x) in [0, 360); channel (M,)
+    1-based; position (M, 3) (m) and velocity (M, 3) (m/s) in the world frame at the exit;
+    mass (M,) (kg).
+    """
+
+    ids: np.ndarray
+    t: np.ndarray
+    angle_deg: np.ndarray
+    channel: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    mass: np.ndarray
+
+    def __len__(self) -> int:
+        """Return the number of exits."""
+        return int(self.ids.shape[0])
+
+
+@dataclass(frozen=True)
+class Failure:
+    """A particle whose integration failed and which was removed."""
+
+    particle_id: int
+    t: float
+    reason: str
+    position: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class StepStats:
+    """Solver statistics of one interval: accepted and rejected steps over all particles."""
+
+    accepted: int
+    rejected: int
+    particles: int
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What :func:`advance` returns."""
+
+    state: SimState
+    exits: ExitEvents
+    failures: tuple[Failure, ...]
+    stats: StepStats
+
+
+def world_from_cone(y: np.ndarray, angle: float, omega: float) -> tuple[np.ndarray, ...]:
+    """
+    Convert cone-axes states (N, 9) to world position, velocity and filter force.
+
+    Returns q (N, 3) (m), qdot (N, 3) (m/s), Q_d (N, 3) (N): q = R(angle) x,
+    qdot = R(angle)(w + omega z x x), Q_d = R(angle) P.
+    """
+    x = y[:, 0:3]
+    w = y[:, 3:6].copy()
+    w[:, 0] -= omega * x[:, 1]
+    w[:, 1] += omega * x[:, 0]
+    return rotate_z(x, angle), rotate_z(w, angle), rotate_z(y[:, 6:9], angle)
+
+
+def cone_from_world(q: np.ndarray, qdot: np.ndarray, q_d: np.ndarray, angle: float,
+                    omega: float) -> np.ndarray:
+    """Inverse of :func:`world_from_cone`: return cone-axes states (N, 9)."""
+    x = rotate_z(q, -angle)
+    v = rotate_z(qdot, -angle)
+    v[:, 0] += omega * x[:, 1]
+    v[:, 1] -= omega * x[:, 0]
+    return np.hstack([x, v, rotate_z(q_d, -angle)])
+
+
+def as_points(name: str, values: object, count: int | None = None) -> np.ndarray:
+    """
+    Return values as a finite (M, 3) float64 array, or raise ScenarioError naming them.
+
+    A single point of shape (3,) is accepted as (1, 3); count, if given, is the required M.
+    """
+    try:
+        arr = np.array(values, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f'{name} must be numbers of shape (M, 3): {exc}') from exc
+    if arr.ndim == 1 and arr.shape[0] == 3:
+        arr = arr.reshape(1, 3)
+    if arr.ndim != 2 or arr.shape[1] != 3 or (count is not None and arr.shape[0] != count):
+        want = f'({count}, 3)' if count is not None else '(M, 3)'
+        raise ScenarioError(f'{name} must have shape {want}, got {arr.shape}')
+    bad = ~np.all(np.isfinite(arr), axis=1)
+    if np.any(bad):
+        i = int(np.argmax(bad))
+        raise ScenarioError(f'{name}[{i}] is not finite: {arr[i].tolist()}')
+    return arr
+
+
+def check_positions(model: ModelParams, positions: np.ndarray) -> None:
+    """Refuse positions outside the cone (rho >= r) or with the centre below its surface."""
+    rho = np.hypot(positions[:, 0], positions[:, 1])
+    surface = model.h * (1.0 - rho / model.r)
+    for i in range(positions.shape[0]):
+        if rho[i] >= model.r:
+            raise ScenarioError(
+                f'position[{i}] {positions[i].tolist()} is outside the cone: radius '
+                f'{rho[i]:.4f} m >= r = {model.r:.4f} m')
+        if positions[i, 2] < surface[i]:
+            raise ScenarioError(
+                f'position[{i}] {positions[i].tolist()} is below the cone surface '
+                f'(z = {surface[i]:.4f} m there)')
+
+
+def add_particles(state: SimState, setup: Setup, positions: object,
+                  velocities: object | None = None,
+                  products: Sequence[ProductParams] | None = None,
+                  omega: float = 0.0) -> tuple[SimState, np.ndarray]:
+    """
+    Return a new state with particles added at time state.t, and their ids.
+
+    positions (M, 3) (m) world frame; velocities (M, 3) (m/s) world frame or None for
+    pieces lying on the feeder and moving with it (qdot = omega z x q); products: one
+    ProductParams per piece or None for the setup's default product; omega (rad/s) the cone's
+    angular velocity at state.t. The filter force starts at zero.
+    """
+    q = as_points('position', positions)
+    count = q.shape[0]
+    check_positions(setup.model, q)
+    if velocities is None:
+        qdot = np.zeros_like(q)
+        qdot[:, 0] = -omega * q[:, 1]
+        qdot[:, 1] = omega * q[:, 0]
+    else:
+        qdot = as_points('velocity', velocities, count)
+    if products is None:
+        rows = np.tile(product_row(setup.model.product), (count, 1))
+    else:
+        if len(products) != count:
+            raise ScenarioError(f'{len(products)} products given for {count} positions')
+        rows = np.array([product_row(p) for p in products]).reshape(count, PRODUCT_WIDTH)
+    y_new = cone_from_world(q, qdot, np.zeros_like(q), state.angle, omega)
+    ids = np.arange(state.next_id, state.next_id + count, dtype=np.int64)
+    new = replace(
+        state,
+        y=np.vstack([state.y, y_new]),
+        products=np.vstack([state.products, rows]),
+        ids=np.concatenate([state.ids, ids]),
+        h=np.concatenate([state.h, np.full(count, setup.solver.h_init)]),
+        next_id=state.next_id + count)
+    return new, ids
+
+
+def remove_particles(state: SimState, ids: object) -> SimState:
+    """Return a new state without the particles whose ids are given."""
+    keep = ~np.isin(state.ids, np.asarray(ids, dtype=np.int64))
+    return replace(state, y=state.y[keep], products=state.products[keep],
+                   ids=state.ids[keep], h=state.h[keep])
+
+
+def advance(state: SimState, setup: Setup, profile: RotationProfile,
+            t1: float) -> StepResult:
+    """
+    Advance every particle from state.t to t1 under the rotation profile.
+
+    Pieces that cross the cone edge are located inside the step, reported in the result's
+    exits and removed; pieces whose integration fails are reported and removed; the others
+    carry on. The inputs are not modified.
+    """
+    seg_t, seg_omega, seg_domega = profile.segments(state.t, t1)
+    y = state.y.copy()
+    h = state.h.copy()
+    n = state.count
+    status = np.full(n, ACTIVE, dtype=np.int64)
+    t_event = np.zeros(n)
+    stats = np.zeros((n, STAT_WIDTH), dtype=np.int64)
+    solver = setup.solver
+    if n:
+        advance_batch(y, state.products, setup.global_row, seg_t, seg_omega, seg_domega,
+                      setup.model.r, h, status, t_event, solver.rtol, setup.atol,
+                      solver.h_min, solver.h_max, solver.h_init, solver.max_steps,
+                      stats)
+    exits = _exit_events(state, setup, profile, y, status, t_event)
+    failures = tuple(
+        Failure(particle_id=int(state.ids[i]), t=float(t_event[i]),
+                reason=FAILURE_REASONS.get(int(stats[i, STAT_REASON]), 'unknown'),
+                position=tuple(float(v) for v in rotate_z(
+                    y[i, 0:3], state.angle + profile.integral(state.t, t_event[i]))))
+        for i in np.flatnonzero(status == FAILED))
+    keep = status == ACTIVE
+    new_state = replace(state, t=float(t1), angle=state.angle + profile.integral(state.t, t1),
+                        y=y[keep], products=state.products[keep], ids=state.ids[keep],
+                        h=h[keep])
+    step_stats = StepStats(accepted=int(stats[:, STAT_ACCEPTED].sum()),
+                           rejected=int(stats[:, STAT_REJECTED].sum()), particles=n)
+    return StepResult(state=new_state, exits=exits, failures=failures, stats=step_stats)
+
+
+def _exit_events(state: SimState, setup: Setup, profile: RotationProfile, y: np.ndarray,
+                 status: np.ndarray, t_event: np.ndarray) -> ExitEvents:
+    idx = np.flatnonzero(status == EXITED)
+    positions = np.zeros((idx.size, 3))
+    velocities = np.zeros((idx.size, 3))
+    for j, i in enumerate(idx):
+        t_exit = float(t_event[i])
+        angle = state.angle + profile.integral(state.t, t_exit)
+        q, qdot, _ = world_from_cone(y[i:i + 1], angle, profile.omega(t_exit))
+        positions[j] = q[0]
+        velocities[j] = qdot[0]
+    angle_deg = np.mod(np.degrees(np.arctan2(positions[:, 1], positions[:, 0])), 360.0)
+    angle_deg = np.where(angle_deg >= 360.0, 0.0, angle_deg)
+    return ExitEvents(ids=state.ids[idx].copy(), t=t_event[idx].copy(), angle_deg=angle_deg,
+                      channel=setup.model.channels.channel_of(angle_deg),
+                      position=positions, velocity=velocities,
+                      mass=state.products[idx, P_M].copy())
+
+
+class Simulator:
+    """
+    Mutable convenience wrapper: a setup, a rotation profile and the current state.
+
+    Used by the headless runner and the ROS node; all physics goes through :func:`advance`.
+    """
+
+    def __init__(self, setup: Setup, profile: RotationProfile, t0: float = 0.0) -> None:
+        """Start an empty simulation at t0 with the cone angle phi(t0) of the profile."""
+        self.setup = setup
+        self.profile = profile
+        self.state = SimState(t=float(t0), angle=profile.angle(t0))
+
+    @property
+    def t(self) -> float:
+        """Return the simulation time (s)."""
+        return self.state.t
+
+    def omega(self) -> float:
+        """Return the cone angular velocity now (rad/s)."""
+        return self.profile.omega(self.state.t)
+
+    def add(self, positions: object, velocities: object | None = None,
+            products: Sequence[ProductParams] | None = None) -> np.ndarray:
+        """Add particles now; return their ids. See :func:`add_particles`."""
+        self.state, ids = add_particles(self.state, self.setup, positions, velocities,
+                                        products, omega=self.omega())
+        return ids
+
+    def advance_to(self, t1: float) -> StepResult:
+        """Advance to t1 and keep the new state; return the step's result."""
+        result = advance(self.state, self.setup, self.profile, t1)
+        self.state = result.state
+        return result
+
+    def world(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return world position (N, 3), velocity (N, 3) and filter force (N, 3) now."""
+        return world_from_cone(self.state.y, self.state.angle, self.omega())
+
+
+def cone_surface_height(model: ModelParams, x: float, y: float) -> float:
+    """Return the height of the cone surface above (x, y) (m), eq. (27) without regularising."""
+    return model.h * (1.0 - math.hypot(x, y) / model.r)
+
+
+def resting_height(model: ModelParams, product: ProductParams, x: float, y: float) -> float:
+    """
+    Return z (m) at which a piece at (x, y) rests on the stationary cone.
+
+    At rest the normal force balances the normal part of gravity: R_a(s) r_f / 2 = N with
+    N = m g cos^2(tilt) (e_Fc is not normalised, |e_Fc| = 1/cos(tilt)), which gives the gap
+    s = r_c + artanh(1 - 2 N / r_f) / r_t above the surface.
+    """
+    cos_t = math.cos(math.radians(model.cone_tilt))
+    normal = product.m * model.g * cos_t * cos_t
+    r_a_rest = normal / (0.5 * product.r_f)
+    if not 0.0 < r_a_rest < 1.0:
+        raise ScenarioError(
+            f'a piece of mass {product.m} kg cannot rest on the cone with r_f = {product.r_f} N')
+    gap = product.r_c + math.atanh(1.0 - 2.0 * r_a_rest) / product.r_t
+    return cone_surface_height(model, x, y) + gap

@@ -1,0 +1,107 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+Re-simulation of a ``sim_node`` recording: its parameters and the inputs applied at each tick.
+
+``sim_node -p replay_commands:=RUN.mcap`` declares the recorded parameters and submits the
+recorded inputs at the same ticks, which reproduces the run exactly.
+"""
+
+from dataclasses import dataclass
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from ..errors import RecordingError
+from ..formats.cdr import CdrError, default_codec
+from ..formats.mcap_reader import open_recording, RecordedMessage
+from ..formats.runlog import END_METADATA_NAME, FORMAT_VERSION, METADATA_NAME
+
+__all__ = ['ResimPlan', 'load_resim_plan']
+
+
+@dataclass(frozen=True)
+class ResimPlan:
+    """
+    What re-simulating a sim_node recording needs.
+
+    parameters: the recorded parameter values (typed); engine_config: the recorded JSON of
+    the engine configuration (for a consistency check); events: recorded ``~/events``
+    by tick index, in order; ticks: the number of ticks the recorded run made (re-simulation
+    stops there); problem: why the recording is incomplete (None if complete).
+    """
+
+    path: Path
+    parameters: dict[str, Any]
+    engine_config: str
+    events: dict[int, list[dict[str, Any]]]
+    ticks: int
+    problem: str | None
+
+
+def load_resim_plan(path: str | os.PathLike) -> ResimPlan:
+    """Read a sim_node recording for re-simulation; raise RecordingError if it cannot be."""
+    recording = open_recording(path)
+    meta = recording.metadata.get(METADATA_NAME)
+    where = str(recording.path)
+    if meta is None or 'parameters_json' not in meta:
+        raise RecordingError(f'{where!r} has no {METADATA_NAME!r} metadata with parameters: '
+                             'not a recording of sim_node')
+    if meta.get('source') != 'sim_node':
+        raise RecordingError(f'{where!r} was written by {meta.get("source")!r}, not sim_node: '
+                             'only sim_node recordings can be re-simulated')
+    if meta.get('format') != FORMAT_VERSION:
+        raise RecordingError(f'{where!r} has format {meta.get("format")!r}; this version '
+                             f'reads format {FORMAT_VERSION}')
+    try:
+        parameters = json.loads(meta['parameters_json'])
+        topics = json.loads(meta['topics'])
+        dt_ns = 1e9 / float(parameters['update_rate'])
+    except (KeyError, TypeError, ValueError) as err:
+        raise RecordingError(f'{where!r}: unreadable {METADATA_NAME} metadata: {err!r}') from err
+    events_topic = topics.get('~/events')
+    states_topic = topics.get('particle_states')
+    end = recording.metadata.get(END_METADATA_NAME, {})
+    ticks = None
+    if 'ticks' in end:
+        ticks = int(end['ticks'])
+    events: dict[int, list[dict[str, Any]]] = {}
+    last_state = None
+    wanted = {events_topic} if ticks is not None else {events_topic, states_topic}
+    for message in recording.messages({t for t in wanted if t}):
+        if message.topic == states_topic:
+            last_state = message.log_time_ns
+            continue
+        event = _event(message, where)
+        events.setdefault(int(event['tick']), []).append(event)
+    if ticks is None:
+        ticks = 0 if last_state is None else int(round(last_state / dt_ns))
+    events = {k: v for k, v in events.items() if k < ticks}
+    return ResimPlan(recording.path, parameters, meta.get('engine_config', ''), events, ticks,
+                     recording.problem)
+
+
+def _event(message: RecordedMessage, where: str) -> dict[str, Any]:
+    try:
+        text = default_codec().decode('std_msgs/msg/String', message.data)['data']
+        event = json.loads(text)
+        if not isinstance(event, dict) or not isinstance(event.get('tick'), int):
+            raise ValueError('not an event object with a tick')
+    except (CdrError, ValueError) as err:
+        raise RecordingError(f'{where!r}: unreadable event at log time '
+                             f'{message.log_time_ns} ns: {err!r}') from err
+    return event

@@ -1,0 +1,830 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The ROS 2 node ``sim_node``: a thin adapter that runs a FeederEngine on a timer.
+
+Run it with ``ros2 run cone_feeder_sim sim_node --ros-args --params-file
+config/sim_node.yaml`` (or ``sim_node`` / ``python -m cone_feeder_sim.sim_node`` in a
+virtual environment with the ``ros-jazzy-*`` wheels). All physics, the drive and the feed
+live in :class:`~cone_feeder_sim.engine.FeederEngine`; this module turns ROS input into
+engine input and engine output into messages. Messages are built from numpy arrays,
+encoded by :mod:`cone_feeder_sim.cdr` and published as serialized bytes; every published
+and received message passes through :meth:`SimNode.add_message_hook` callbacks with its
+exact bytes (for MCAP recording).
+
+Time: the engine's step is ``dt = 1 / update_rate`` of simulated time. The tick timer runs
+on the steady clock with period ``dt / real_time_factor`` (``real_time_factor`` 0: as fast
+as possible). One timer callback runs exactly one tick: when the CPU cannot keep up, the
+timer skips the missed periods (no backlog, no catching up), simulated time runs slower
+than ``real_time_factor`` asks, and ``/diagnostics`` says so (level WARN). Header stamps are
+simulation time; ``/clock`` (when ``publish_clock``) carries the same time, never 0 (the
+first tick ends at ``dt``). The node's own clock and ``use_sim_time`` do not drive it.
+
+Topics (relative names, so namespaces and remapping apply; ``frame_id`` ``feeder`` by
+default, fixed, z up, origin at the centre of the cone base):
+
+=================  ==================================  ======================================
+topic              type                                QoS
+=================  ==================================  ======================================
+rotation_cmd (in)  std_msgs/Float64 (rad/s, > 0 ccw)   reliable, keep last 10, volatile
+spawn (in)         geometry_msgs/PoseArray             reliable, keep last 10, volatile
+particles          geometry_msgs/PoseArray             reliable, keep last 10, volatile
+particle_states    sensor_msgs/PointCloud2             reliable, keep last 10, volatile
+exit_events        sensor_msgs/PointCloud2             reliable, keep last 1000, volatile
+channel_mass       std_msgs/Float64MultiArray          reliable, keep last 1, transient local
+cone_state         sensor_msgs/JointState              reliable, keep last 10, volatile
+markers            visualization_msgs/MarkerArray      reliable, keep last 1, transient local
+/diagnostics       diagnostic_msgs/DiagnosticArray     reliable, keep last 10, volatile
+/clock             rosgraph_msgs/Clock                 reliable, keep last 1, volatile
+~/events           std_msgs/String (JSON)              reliable, keep last 1000, volatile
+=================  ==================================  ======================================
+
+State topics are reliable (a reliable writer matches both reliable and best-effort readers,
+so RViz, Foxglove and ``ros2 topic echo`` connect with their defaults) with a short
+keep-last history: a slow reader loses old states instead of slowing the simulator down.
+Exit events are reliable with a deep history because a lost event is lost product.
+``channel_mass`` and ``markers`` are transient local with depth 1 so that late joiners get
+the current totals and the static scene: every marker message holds the static markers
+(cone surface, channel sectors and labels) besides the dynamic ones (pieces, cone angle).
+
+``particle_states`` points: x, y, z (m), vx, vy, vz (m/s) FLOAT32, id UINT32, mass (kg)
+FLOAT32; 32 bytes per point, little endian, height 1. ``exit_events`` points: x, y, z (m),
+vx, vy, vz (m/s), exit_time (s, simulation time), angle (rad, atan2(y, x) in (-pi, pi]),
+mass (kg) FLOAT64, id UINT32, channel UINT32 (1-based); 80 bytes per point; one message per
+tick in which pieces left. Particle ids are unique over a run (they keep counting after a
+reset) and wrap at 2**32 on the wire.
+
+Spawn: poses in frame ``feeder`` or with an empty ``frame_id`` (taken as ``feeder``); other
+frames are refused with a warning, as are poses outside the cone, below its surface or
+non-finite; valid poses of a message are accepted. Orientations are ignored. New pieces get
+the default product and start at rest in the world frame (dropped).
+
+Services: ``~/reset`` (std_srvs/Trigger), ``~/pause`` (std_srvs/SetBool: true pauses, false
+resumes), ``~/step`` (std_srvs/Trigger: one tick while paused; refused otherwise). Inputs
+(commands, spawns, resets, parameter changes of the drive and feed) are applied at the start
+of the next tick, so while paused they wait for ``~/step`` or the resume.
+
+Parameters are listed by :func:`parameter_specs` (descriptions and ranges are declared with
+them). Model parameters are ``model.<key>`` with the keys of ``config/table2.yaml``; their
+defaults come from ``parameter_file`` ('' = the package's table2.yaml), so a parameter file
+sets the base and ``model.<key>`` overrides single values. Model, solver, update rate, seed,
+frame and initial pieces are read-only; the drive (limits, timeout, pattern), the feed, the
+real-time factor, the marker rate and the diagnostics period can be changed at run time;
+invalid values are refused with the reason. Double parameters need a decimal point in
+parameter files (``2.0``, not ``2``); an empty array (``[]``) means "none".
+
+Recording (``record_path``, see ``doc/recording.md``): every published and received
+message goes to one MCAP file (log time = simulation time) through a writer thread; the
+inputs the engine applied are published on ``~/events`` with their tick index, so that
+``replay_commands`` can re-simulate the run exactly. ``main()`` finishes the file on a
+normal end, SIGINT and SIGTERM.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+import datetime
+import json
+import os
+from pathlib import Path
+import signal
+import sys
+import time
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock as ClockMessage
+from sensor_msgs.msg import JointState, PointCloud2
+from std_msgs.msg import Float64, Float64MultiArray, String
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
+
+from .parameters import (
+    declare, drive_from_values, engine_config_from_values, feed_from_values, LIVE_PARAMETERS,
+    parameter_specs, ParamSpec, RUN_PARAMETERS)
+from .qos import rclpy_qos
+from .resim import load_resim_plan, ResimPlan
+from .. import __version__
+from ..errors import ConeFeederError, ParameterError
+from ..feeder.engine import check_feed_fits, FeederEngine, TickResult
+from ..formats.cdr import CdrError, default_codec
+from ..formats.mcap_writer import COMPRESSIONS
+from ..formats.messages import (
+    channel_mass_message, clock_message, cone_state_message, exits_message, header, MarkerBuilder,
+    MarkerSchedule, particles_message, stamp, stamp_ns, states_message)
+from ..formats.parameter_file import load_model_params
+from ..formats.runlog import (
+    engine_config_json, engine_input_from_event, event_text, expand_record_path, FORMAT_VERSION,
+    input_event, INPUT_EVENTS, METADATA_NAME, parameter_text, RunRecorder, to_jsonable)
+from ..formats.topics import COMMAND_QOS, MessageRecord, QosProfile, TOPICS
+from ..physics.params import model_params_from_mapping
+from ..physics.simulation import check_positions
+
+__all__ = ['SimNode', 'TopicInfo', 'main']
+
+NODE_NAME = 'sim_node'
+
+# --------------------------------------------------------------------------- hooks
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """A topic of the node: resolved name, type, direction and QoS (for recorders)."""
+
+    topic: str
+    type_name: str
+    direction: str
+    qos: QosProfile
+
+
+MessageHook = Callable[[MessageRecord], None]
+
+
+@dataclass(frozen=True)
+class _Output:
+    """A publisher with its resolved topic, type name and CDR encoder."""
+
+    publisher: Any
+    topic: str
+    type_name: str
+    encode: Callable[[Any], bytes]
+
+
+class _Window:
+    """Counters of the current diagnostics window."""
+
+    def __init__(self, wall: float, sim: float) -> None:
+        self.wall0 = wall
+        self.sim0 = sim
+        self.ticks = 0
+        self.step_s = 0.0
+        self.step_max = 0.0
+        self.publish_s = 0.0
+        self.overruns = 0
+        self.skipped = 0
+        self.accepted = 0
+        self.rejected = 0
+
+
+class SimNode(Node):
+    """The cone feeder simulator as a ROS 2 node; see the module documentation."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        """Declare the parameters, build the engine and create every ROS handle."""
+        super().__init__(kwargs.pop('node_name', NODE_NAME), **kwargs)
+        try:
+            self._setup()
+        except BaseException:
+            self.destroy_node()
+            raise
+
+    def _setup(self) -> None:
+        self._codec = default_codec()
+        self._hooks: list[MessageHook] = []
+        self._topics: dict[str, TopicInfo] = {}
+        self._topic_names: dict[str, str] = {}
+        self._recorder: RunRecorder | None = None
+        self._resim: ResimPlan | None = None
+        self._resim_active = False
+        specs = {s.name: s for s in parameter_specs()}
+        replay = declare(self, specs['replay_commands']).value
+        if replay:
+            self._resim = load_resim_plan(replay)
+            self._resim_active = True
+        file_param = self._declare(specs['parameter_file']).value
+        if self._resim is not None:
+            # every model.<key> is recorded: the model does not depend on the file any more
+            self._base_model = model_params_from_mapping({
+                name[len('model.'):]: value for name, value in self._resim.parameters.items()
+                if name.startswith('model.')})
+        else:
+            # '' = the package's table2.yaml
+            self._base_model = load_model_params(file_param or None)
+        self._specs = {s.name: s for s in parameter_specs(self._base_model)}
+        for spec in self._specs.values():
+            if spec.name not in ('parameter_file', 'replay_commands'):
+                self._declare(spec)
+        values = self._values()
+        self._engine = FeederEngine(engine_config_from_values(values, self._base_model))
+        self._frame = str(values['frame_id'])
+        self._rtf = float(values['real_time_factor'])
+        self._markers = MarkerSchedule(float(values['markers.rate']))
+        self._paused = False
+        self._total_exits = 0
+        self._total_failures = 0
+        self._refused = 0
+        self._last_tick: TickResult | None = None
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._last_tick_wall: float | None = None
+        self._window = _Window(time.perf_counter(), self._engine.t)
+        self._timing = [0, 0.0, 0.0]  # ticks, step s, publish s since the start
+
+        self._pub_particles = self._publisher(PoseArray, 'particles')
+        self._pub_states = self._publisher(PointCloud2, 'particle_states')
+        self._pub_exits = self._publisher(PointCloud2, 'exit_events')
+        self._pub_channel = self._publisher(Float64MultiArray, 'channel_mass')
+        self._pub_cone = self._publisher(JointState, 'cone_state')
+        self._pub_markers = self._publisher(MarkerArray, 'markers')
+        self._pub_diag = self._publisher(DiagnosticArray, '/diagnostics')
+        self._pub_clock = (self._publisher(ClockMessage, '/clock')
+                           if values['publish_clock'] else None)
+        self._pub_events = self._publisher(String, '~/events')
+        self._sub_cmd = self.create_subscription(
+            Float64, 'rotation_cmd', self._on_rotation_cmd, rclpy_qos(COMMAND_QOS), raw=True)
+        self._sub_spawn = self.create_subscription(
+            PoseArray, 'spawn', self._on_spawn, rclpy_qos(COMMAND_QOS), raw=True)
+        for sub, name in ((self._sub_cmd, 'rotation_cmd'), (self._sub_spawn, 'spawn')):
+            spec = TOPICS[name]
+            self._topics[sub.topic_name] = TopicInfo(sub.topic_name, spec.type_name, 'in',
+                                                     spec.qos)
+            self._topic_names[name] = sub.topic_name
+        self._srv_reset = self.create_service(Trigger, '~/reset', self._on_reset)
+        self._srv_pause = self.create_service(SetBool, '~/pause', self._on_pause)
+        self._srv_step = self.create_service(Trigger, '~/step', self._on_step)
+
+        self._marker_builder = MarkerBuilder(self._engine.model, self._frame, self._codec)
+        self._start_recording(values)
+        if self._resim is not None:
+            self._check_resim_config()
+        start_paused = bool(values['start_paused'])
+        self._tick_timer = self.create_timer(self._tick_period(), self._on_timer,
+                                             clock=self._steady, autostart=not start_paused)
+        self._paused = start_paused
+        self._diag_timer = self.create_timer(float(values['diagnostics.period']),
+                                             self._publish_diagnostics, clock=self._steady)
+        self._flush_timer = (self.create_timer(0.25, self._on_flush_timer, clock=self._steady)
+                             if self._recorder is not None else None)
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.get_logger().info(
+            f'simulating {self._engine.piece_count} pieces, dt = {self._engine.dt:g} s, '
+            f'real_time_factor = {self._rtf:g}, feed {self._engine.feed.rate:g} pieces/s')
+        if self._resim is not None and self._resim.ticks == 0:
+            self._finish_resim()
+
+    def _declare(self, spec: 'ParamSpec') -> Parameter:
+        """Declare a parameter; while re-simulating, take recorded values over given ones."""
+        plan = self._resim
+        if plan is None or spec.name in LIVE_PARAMETERS or spec.name not in plan.parameters:
+            return declare(self, spec)
+        value = plan.parameters[spec.name]
+        if value is None or value == []:
+            value = spec.type_()  # an empty array: declared without a value, as '[]' does
+        return declare(self, spec, value, ignore_override=True)
+
+    # ------------------------------------------------------------------ recording
+
+    def _start_recording(self, values: dict[str, Any]) -> None:
+        """Open the MCAP file of this run (refused with a clear error if impossible)."""
+        template = str(values['record_path'])
+        if not template:
+            return
+        path = expand_record_path(template).absolute()
+        topics = [(info.topic, info.type_name, info.qos) for info in self._topics.values()]
+        compression = str(values['record_compression'])
+        if compression not in COMPRESSIONS:
+            raise ParameterError(f'record_compression must be one of {", ".join(COMPRESSIONS)}, '
+                                 f'got {compression!r}')
+        self._recorder = RunRecorder(path, topics, {METADATA_NAME: self._metadata(values)},
+                                     compression=compression)
+        self.add_message_hook(self._recorder.hook)
+        self.get_logger().info(f'recording to {path}')
+
+    def _metadata(self, values: dict[str, Any]) -> dict[str, str]:
+        """Return the cone_feeder_sim metadata: parameters and what re-simulation needs."""
+        data = {name: parameter_text(value) for name, value in values.items()}
+        data.update({
+            'format': FORMAT_VERSION,
+            'version': __version__,
+            'source': 'sim_node',
+            'node': self.get_fully_qualified_name(),
+            'namespace': self.get_namespace(),
+            'dt': repr(self._engine.dt),
+            'seed': str(self._engine.config.seed),
+            'model_options': json.dumps({
+                'normal_force': self._engine.model.normal_force,
+                'friction_direction': self._engine.model.friction_direction}),
+            'engine_config': engine_config_json(self._engine.config),
+            'parameters_json': json.dumps(to_jsonable(values)),
+            'topics': json.dumps(self._topic_names),
+            'input_topics': json.dumps(sorted(
+                info.topic for info in self._topics.values() if info.direction == 'in')),
+            'created': datetime.datetime.now().astimezone().isoformat(timespec='seconds'),
+            'ros_distro': os.environ.get('ROS_DISTRO', ''),
+        })
+        return data
+
+    def _on_flush_timer(self) -> None:
+        recorder = self._recorder
+        if recorder is None:
+            return
+        if recorder.error is not None:
+            self.get_logger().error(
+                f'recording to {recorder.path} stopped: {recorder.error}',
+                throttle_duration_sec=60.0)
+        recorder.maybe_flush()
+
+    def close_recording(self) -> None:
+        """Finish the MCAP file (summary, statistics); idempotent. destroy_node() calls it."""
+        recorder = getattr(self, '_recorder', None)
+        if recorder is None or recorder.closed:
+            return
+        if recorder.hook in self._hooks:
+            self.remove_message_hook(recorder.hook)
+        recorder.close(end_metadata={
+            'ticks': str(self._engine.tick_index), 'end_time': repr(self._engine.t),
+            'exits': str(self._total_exits), 'failures': str(self._total_failures),
+            'refused_inputs': str(self._refused)})
+        if recorder.error is not None:
+            self._final_log('error', f'recording {recorder.path} is incomplete: '
+                            f'{recorder.error}')
+        else:
+            self._final_log('info', f'recorded {recorder.message_count} messages to '
+                            f'{recorder.path}')
+
+    def _final_log(self, level: str, text: str) -> None:
+        """Log at shutdown: after a signal the context is gone and /rosout with it."""
+        if self.context.ok():
+            getattr(self.get_logger(), level)(text)
+        else:
+            sys.stderr.write(f'[{level.upper()}] [{self.get_name()}]: {text}\n')
+
+    @property
+    def recording_path(self) -> Path | None:
+        """Return the path of this run's MCAP file (None when not recording)."""
+        return None if self._recorder is None else self._recorder.path
+
+    def destroy_node(self) -> None:
+        """Finish the recording, then destroy the node's handles."""
+        try:
+            self.close_recording()
+        finally:
+            super().destroy_node()
+
+    # ------------------------------------------------------------------ re-simulation
+
+    def _check_resim_config(self) -> None:
+        plan = self._resim
+        assert plan is not None
+        if plan.engine_config and plan.engine_config != engine_config_json(self._engine.config):
+            self.get_logger().warning(
+                f'the engine configuration built from the parameters of {plan.path} differs '
+                'from the recorded one (recorded by another version?): the re-simulation may '
+                'differ')
+        if plan.problem:
+            self.get_logger().warning(f'{plan.path} is incomplete ({plan.problem}): '
+                                      f're-simulating its {plan.ticks} readable ticks')
+        count = sum(len(v) for v in plan.events.values())
+        self.get_logger().info(
+            f're-simulating {plan.path}: {plan.ticks} ticks, {count} recorded events; '
+            'parameters, initial pieces and inputs come from the recording')
+
+    @property
+    def replaying(self) -> bool:
+        """Tell whether the node is re-simulating a recording (until its last tick)."""
+        return self._resim_active
+
+    def _apply_recorded(self) -> None:
+        """Submit the recorded inputs of the next tick (re-simulation)."""
+        plan = self._resim
+        assert plan is not None
+        for event in plan.events.get(self._engine.tick_index, ()):
+            kind = event.get('event')
+            if kind in INPUT_EVENTS:
+                self._engine.submit(engine_input_from_event(event))
+            elif kind == 'parameters' and 'markers.rate' in event.get('values', {}):
+                self._markers.rate = float(event['values']['markers.rate'])
+
+    def _finish_resim(self) -> None:
+        self._resim_active = False
+        plan = self._resim
+        assert plan is not None
+        self.set_paused(True)
+        self.get_logger().info(
+            f're-simulation of {plan.path} done after {plan.ticks} ticks (t = '
+            f'{self._engine.t:.6f} s); paused: resume with ~/pause false to go on live')
+
+    def _refuse_live(self, what: str) -> bool:
+        """Refuse a live input while re-simulating; return whether it was refused."""
+        if not self._resim_active:
+            return False
+        self._refused += 1
+        self.get_logger().warning(f'{what} refused: re-simulating a recording',
+                                  throttle_duration_sec=1.0)
+        return True
+
+    # ------------------------------------------------------------------ plumbing
+
+    def _publisher(self, msg_type: Any, name: str) -> '_Output':
+        spec = TOPICS[name]
+        pub = self.create_publisher(msg_type, name, rclpy_qos(spec.qos))
+        self._topics[pub.topic_name] = TopicInfo(pub.topic_name, spec.type_name, 'out',
+                                                 spec.qos)
+        self._topic_names[name] = pub.topic_name
+        return _Output(pub, pub.topic_name, spec.type_name, self._codec.encoder(spec.type_name))
+
+    def _values(self) -> dict[str, Any]:
+        # get_parameter_or: an empty list in a parameter file leaves an array NOT_SET
+        return {name: self.get_parameter_or(name).value for name in self._specs}
+
+    def _tick_period(self) -> float:
+        return 0.0 if self._rtf == 0.0 else self._engine.dt / self._rtf
+
+    def _publish(self, out: '_Output', message: dict[str, Any], stamp_ns: int) -> None:
+        data = out.encode(message)
+        out.publisher.publish(data)
+        if self._hooks:
+            self._emit(MessageRecord('out', out.topic, out.type_name, data, stamp_ns,
+                                     time.time_ns()))
+
+    def _emit(self, record: MessageRecord) -> None:
+        for hook in list(self._hooks):
+            try:
+                hook(record)
+            except Exception as exc:  # noqa: B902 - a broken hook must not stop the node
+                self.get_logger().error(f'message hook {hook!r} failed: {exc}',
+                                        throttle_duration_sec=5.0)
+
+    def add_message_hook(self, hook: MessageHook) -> None:
+        """Call hook with every published and received message (exact serialized bytes)."""
+        self._hooks.append(hook)
+
+    def remove_message_hook(self, hook: MessageHook) -> None:
+        """Stop calling hook."""
+        self._hooks.remove(hook)
+
+    def topics(self) -> list[TopicInfo]:
+        """Return the node's topics with types, directions and QoS."""
+        return list(self._topics.values())
+
+    @property
+    def engine(self) -> FeederEngine:
+        """Return the engine, for tests and tools; submit inputs from the node's thread."""
+        return self._engine
+
+    @property
+    def paused(self) -> bool:
+        """Tell whether the tick timer is paused."""
+        return self._paused
+
+    @property
+    def timing(self) -> tuple[int, float, float]:
+        """Return ticks run, wall seconds in engine ticks and in publishing, since the start."""
+        return self._timing[0], self._timing[1], self._timing[2]
+
+    @property
+    def last_tick(self) -> TickResult | None:
+        """Return the result of the last tick, if any."""
+        return self._last_tick
+
+    def _now_ns(self) -> int:
+        return stamp_ns(self._engine.t)
+
+    def _publish_event(self, event: dict[str, Any], time_ns: int | None = None) -> None:
+        """Publish an event on ~/events (and so record it)."""
+        self._publish(self._pub_events, {'data': event_text(event)},
+                      self._now_ns() if time_ns is None else time_ns)
+
+    def _node_event(self, kind: str, **fields: Any) -> None:
+        self._publish_event({'event': kind, 'tick': self._engine.tick_index,
+                             't': self._engine.t, **fields})
+
+    # ------------------------------------------------------------------ inputs
+
+    def _on_rotation_cmd(self, data: bytes) -> None:
+        if self._hooks:
+            self._emit(MessageRecord('in', self._sub_cmd.topic_name, 'std_msgs/msg/Float64',
+                                     bytes(data), self._now_ns(), time.time_ns()))
+        if self._refuse_live('rotation_cmd'):
+            return
+        try:
+            value = self._codec.decode('std_msgs/msg/Float64', data, strict=False)['data']
+            self._engine.command(value)
+        except (CdrError, ConeFeederError) as exc:
+            self._refused += 1
+            self.get_logger().warning(f'rotation_cmd refused: {exc}', throttle_duration_sec=1.0)
+            return
+        limit = self._engine.drive.max_angular_velocity
+        if abs(value) > limit:
+            self.get_logger().warning(
+                f'rotation_cmd {value:g} rad/s clamped to the limit {limit:g} rad/s',
+                throttle_duration_sec=5.0)
+
+    def _on_spawn(self, data: bytes) -> None:
+        if self._hooks:
+            self._emit(MessageRecord('in', self._sub_spawn.topic_name,
+                                     'geometry_msgs/msg/PoseArray', bytes(data),
+                                     self._now_ns(), time.time_ns()))
+        if self._refuse_live('spawn'):
+            return
+        try:
+            msg = self._codec.decode('geometry_msgs/msg/PoseArray', data, strict=False)
+        except CdrError as exc:
+            self._refused += 1
+            self.get_logger().warning(f'spawn refused: cannot decode the message: {exc}')
+            return
+        frame = msg['header']['frame_id']
+        if frame not in ('', self._frame):
+            self._refused += 1
+            self.get_logger().warning(
+                f'spawn refused: poses are in frame {frame!r}, expected {self._frame!r} '
+                '(or an empty frame_id)')
+            return
+        model = self._engine.model
+        valid = []
+        problems = []
+        for i, pose in enumerate(msg['poses']):
+            p = pose['position']
+            point = np.array([[p['x'], p['y'], p['z']]])
+            try:
+                if not np.all(np.isfinite(point)):
+                    raise ConeFeederError(f'position {point[0].tolist()} is not finite')
+                check_positions(model, point)
+            except ConeFeederError as exc:
+                problems.append(f'pose {i}: {str(exc).replace("position[0] ", "")}')
+                continue
+            valid.append(point[0])
+        if problems:
+            self._refused += len(problems)
+            self.get_logger().warning(
+                f'spawn: refused {len(problems)} of {len(msg["poses"])} poses: '
+                + '; '.join(problems[:5]) + (' ...' if len(problems) > 5 else ''))
+        if valid:
+            positions = np.array(valid)
+            try:
+                self._engine.spawn(positions, velocities=np.zeros_like(positions))
+            except ConeFeederError as exc:
+                self._refused += len(valid)
+                self.get_logger().warning(f'spawn refused: {exc}')
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response
+                  ) -> Trigger.Response:
+        if self._refuse_live('reset'):
+            response.success = False
+            response.message = 're-simulating a recording: live inputs are refused until its end'
+            return response
+        self._engine.reset()
+        response.success = True
+        response.message = 'reset queued: applied at the start of the next tick'
+        if self._paused:
+            response.message += ' (paused: call ~/step or resume with ~/pause false)'
+        self.get_logger().info('reset requested')
+        return response
+
+    def _on_pause(self, request: SetBool.Request, response: SetBool.Response
+                  ) -> SetBool.Response:
+        response.success = True
+        response.message = self.set_paused(bool(request.data))
+        return response
+
+    def _on_step(self, request: Trigger.Request, response: Trigger.Response
+                 ) -> Trigger.Response:
+        if not self._paused:
+            response.success = False
+            response.message = 'not paused: call ~/pause with data: true first'
+            return response
+        result = self.step()
+        response.success = True
+        response.message = f'stepped to t = {result.t:.6f} s ({result.count} pieces)'
+        return response
+
+    def set_paused(self, paused: bool) -> str:
+        """Pause or resume the tick timer; return what happened (as ~/pause answers)."""
+        if paused:
+            if self._paused:
+                return 'already paused'
+            self._tick_timer.cancel()
+            self._paused = True
+            self._node_event('pause')
+            return f'paused at t = {self._engine.t:.6f} s'
+        if not self._paused:
+            return 'already running'
+        self._paused = False
+        self._last_tick_wall = None
+        self._window = _Window(time.perf_counter(), self._engine.t)
+        self._tick_timer.reset()
+        self._node_event('resume')
+        return f'resumed at t = {self._engine.t:.6f} s'
+
+    def step(self) -> TickResult:
+        """Run one tick now and publish it (what ~/step does while paused)."""
+        self._node_event('step')
+        return self._run_tick()
+
+    # ------------------------------------------------------------------ parameters
+
+    def _check_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        if self._resim_active:
+            fixed = [p.name for p in parameters
+                     if p.name in RUN_PARAMETERS or p.name.startswith('feed.')]
+            if fixed:
+                return SetParametersResult(
+                    successful=False, reason=f're-simulating a recording: {", ".join(fixed)} '
+                    'come from the recording until its end')
+        values = self._values()
+        for param in parameters:
+            if param.name in self._specs:
+                values[param.name] = param.value
+        try:
+            drive_from_values(values)
+            check_feed_fits(self._engine.model, feed_from_values(values))
+        except ConeFeederError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        names = {p.name for p in parameters}
+        values = self._values()
+        drive_keys = {'max_angular_velocity', 'max_angular_acceleration', 'cmd_timeout',
+                      'open_loop_pattern'}
+        drive = drive_from_values(values) if names & drive_keys else None
+        feed = feed_from_values(values) if any(n.startswith('feed.') for n in names) else None
+        if drive is not None or feed is not None:
+            self._engine.reconfigure(drive=drive, feed=feed)
+        if 'real_time_factor' in names:
+            self._rtf = float(values['real_time_factor'])
+            self._tick_timer.timer_period_ns = int(round(self._tick_period() * 1e9))
+            self._last_tick_wall = None
+            self._window = _Window(time.perf_counter(), self._engine.t)
+        if 'markers.rate' in names:
+            self._markers.rate = float(values['markers.rate'])
+        if 'diagnostics.period' in names:
+            self._diag_timer.timer_period_ns = int(round(values['diagnostics.period'] * 1e9))
+        self._node_event('parameters', values={p.name: p.value for p in parameters})
+
+    # ------------------------------------------------------------------ the tick
+
+    def _on_timer(self) -> None:
+        now = time.perf_counter()
+        period = self._tick_period()
+        if self._last_tick_wall is not None and period > 0.0:
+            missed = int((now - self._last_tick_wall) / period + 0.5) - 1
+            if missed > 0:
+                self._window.skipped += missed
+        self._last_tick_wall = now
+        self._run_tick()
+        if period > 0.0 and time.perf_counter() - now > period:
+            self._window.overruns += 1
+
+    def _run_tick(self) -> TickResult:
+        start = time.perf_counter()
+        if self._resim_active:
+            self._apply_recorded()
+        result = self._engine.tick()
+        stepped = time.perf_counter()
+        self._publish_tick(result)
+        done = time.perf_counter()
+        window = self._window
+        window.ticks += 1
+        window.step_s += stepped - start
+        window.step_max = max(window.step_max, stepped - start)
+        window.publish_s += done - stepped
+        self._timing[0] += 1
+        self._timing[1] += stepped - start
+        self._timing[2] += done - stepped
+        window.accepted += result.stats.accepted
+        window.rejected += result.stats.rejected
+        self._last_tick = result
+        self._total_exits += len(result.exits)
+        self._total_failures += len(result.failures)
+        for failure in result.failures:
+            self.get_logger().warning(
+                f'piece {failure.particle_id} removed at t = {failure.t:.6f} s: '
+                f'{failure.reason} (at {failure.position})')
+        if result.reset:
+            self._markers.restart()
+        if self._resim_active and self._engine.tick_index >= self._resim.ticks:
+            self._finish_resim()
+        return result
+
+    def _publish_tick(self, res: TickResult) -> None:
+        if res.applied:
+            t0_ns = stamp_ns(res.t0)
+            for item in res.applied:
+                self._publish_event(input_event(res.index, res.t0, item), t0_ns)
+        head = header(res.t, self._frame)
+        t_ns = stamp_ns(res.t)
+        if self._pub_clock is not None:
+            self._publish(self._pub_clock, clock_message(res.t), t_ns)
+        self._publish(self._pub_particles, particles_message(head, res.positions), t_ns)
+        self._publish(self._pub_states, states_message(
+            head, res.ids, res.positions, res.velocities, res.masses), t_ns)
+        if len(res.exits):
+            self._publish(self._pub_exits, exits_message(head, res.exits), t_ns)
+        self._publish(self._pub_channel, channel_mass_message(res.channel_mass), t_ns)
+        self._publish(self._pub_cone, cone_state_message(head, res.angle, res.omega), t_ns)
+        if self._markers.due(res.t, res.reset):
+            self._publish(self._pub_markers, self._marker_builder.message(
+                head, res.angle, res.positions), t_ns)
+
+    # ------------------------------------------------------------------ diagnostics
+
+    def _publish_diagnostics(self) -> None:
+        now = time.perf_counter()
+        window = self._window
+        wall = now - window.wall0
+        sim = self._engine.t - window.sim0
+        achieved = sim / wall if wall > 0 else 0.0
+        ticks = max(window.ticks, 1)
+        level = 0
+        if self._paused:
+            message = f'paused at t = {self._engine.t:.3f} s'
+        elif self._rtf == 0.0:
+            message = f'running as fast as possible: real-time factor {achieved:.2f}'
+        elif window.ticks and achieved < 0.9 * self._rtf:
+            level = 1
+            message = (f'cannot keep up: real-time factor {achieved:.2f} < {self._rtf:g} '
+                       f'(tick {1e3 * (window.step_s + window.publish_s) / ticks:.3g} ms, '
+                       f'period {1e3 * self._tick_period():.3g} ms); simulation time runs '
+                       'slower, ticks are not caught up')
+        else:
+            message = f'real-time factor {achieved:.2f} (target {self._rtf:g})'
+        res = self._last_tick
+        values = {
+            'simulation time (s)': f'{self._engine.t:.6f}',
+            'paused': str(self._paused),
+            'real-time factor (achieved)': f'{achieved:.4f}',
+            'real-time factor (target)': f'{self._rtf:g}',
+            'update rate (Hz)': f'{1.0 / self._engine.dt:g}',
+            'ticks in window': str(window.ticks),
+            'step time mean (ms)': f'{1e3 * window.step_s / ticks:.3f}',
+            'step time max (ms)': f'{1e3 * window.step_max:.3f}',
+            'publish time mean (ms)': f'{1e3 * window.publish_s / ticks:.3f}',
+            'overruns (ticks longer than the period)': str(window.overruns),
+            'skipped periods': str(window.skipped),
+            'pieces': str(self._engine.piece_count),
+            'accepted steps': str(window.accepted),
+            'rejected steps': str(window.rejected),
+            'exits (total)': str(self._total_exits),
+            'failures (total)': str(self._total_failures),
+            'refused inputs (total)': str(self._refused),
+            'cone omega (rad/s)': f'{self._engine.omega:.4f}',
+            'drive mode': res.mode if res is not None else 'not started',
+        }
+        message_dict = {
+            'header': {'stamp': stamp(self._engine.t), 'frame_id': ''},
+            'status': [{'level': level,
+                        'name': f'{self.get_fully_qualified_name()}: simulation',
+                        'message': message, 'hardware_id': 'cone_feeder',
+                        'values': [{'key': k, 'value': v} for k, v in values.items()]}]}
+        self._publish(self._pub_diag, message_dict, self._now_ns())
+        if not self._paused:
+            self._window = _Window(now, self._engine.t)
+
+
+def main(args: list[str] | None = None) -> int:
+    """
+    Run the node until shut down; return the process exit status.
+
+    SIGINT and SIGTERM (rclpy's handlers shut the context down) end the spin; the recording
+    is finished in every path by destroy_node(), with both signals blocked meanwhile so that
+    a second Ctrl-C cannot cut the file short.
+    """
+    rclpy.init(args=args)
+    node = None
+    status = 0
+    try:
+        node = SimNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ConeFeederError, ParameterException) as exc:
+        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
+        status = 1
+    except Exception:  # noqa: B902 - only to tell a shutdown race from a real error
+        if rclpy.ok():
+            raise
+        # SIGINT/SIGTERM shut the context down while the executor built its wait set
+    finally:
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        try:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    return status
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,396 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Tests of cone_feeder_sim.feeder.engine: the drive, the feed, inputs per tick and determinism."""
+
+import math
+
+from cone_feeder_sim.errors import ParameterError, ScenarioError
+from cone_feeder_sim.feeder.engine import (
+    drive_profile, DriveParams, EngineConfig, FeederEngine, FeedParams, pattern_from_flat,
+    PieceSpec, Reconfigure, ResetRequest, RotationCommand, SpawnRequest)
+from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.simulation import resting_height
+import numpy as np
+import pytest
+
+MODEL = ModelParams()
+TABLE_I = (((0.11, -0.01, 0.03), 225.0), ((-0.10, -0.01, 0.03), 135.0),
+           ((0.08, -0.13, 0.03), 750.0), ((-0.07, 0.04, 0.03), 750.0),
+           ((0.14, 0.06, 0.03), 30.0))
+
+
+def table_i_pieces() -> tuple[PieceSpec, ...]:
+    return tuple(PieceSpec(p, product=MODEL.product.with_overrides({'d': d}))
+                 for p, d in TABLE_I)
+
+
+def resting(x: float, y: float) -> tuple[float, float, float]:
+    return (x, y, resting_height(MODEL, MODEL.product, x, y))
+
+
+def engine(**kwargs: object) -> FeederEngine:
+    drive = kwargs.pop('drive', DriveParams(max_angular_velocity=10.0,
+                                            max_angular_acceleration=20.0, cmd_timeout=0.0))
+    return FeederEngine(EngineConfig(drive=drive, **kwargs))  # type: ignore[arg-type]
+
+
+def test_starts_at_rest_and_time_is_index_times_dt() -> None:
+    eng = engine(dt=0.01)
+    assert (eng.t, eng.omega, eng.angle, eng.tick_index, eng.piece_count) == (0, 0, 0, 0, 0)
+    for k in range(7):
+        res = eng.tick()
+        assert res.index == k
+        assert res.t0 == k * 0.01 and res.t == (k + 1) * 0.01
+    assert eng.t == 7 * 0.01 and eng.tick_index == 7
+
+
+def test_command_followed_within_acceleration_limit_with_a_kink_mid_tick() -> None:
+    eng = engine(dt=0.02)
+    eng.command(1.0)
+    omegas = []
+    angles = [0.0]
+    for _ in range(4):
+        res = eng.tick()
+        assert res.mode == 'command' and res.target_omega == 1.0
+        omegas.append(res.omega)
+        angles.append(res.angle)
+    np.testing.assert_allclose(omegas, [0.4, 0.8, 1.0, 1.0])
+    # third tick: ramp 0.8 -> 1.0 in 0.01 s at 20 rad/s^2, then 0.01 s at 1.0 rad/s
+    assert angles[3] - angles[2] == pytest.approx(0.8 * 0.01 + 0.5 * 20 * 0.01 ** 2 + 0.01,
+                                                  abs=1e-15)
+    assert angles[1] == pytest.approx(0.5 * 20 * 0.02 ** 2, abs=1e-15)
+
+
+def test_drive_profile_shapes() -> None:
+    full = drive_profile(1.0, 1.02, 0.0, 5.0, 20.0)
+    np.testing.assert_allclose(full.omegas, [0.0, 0.4])
+    kink = drive_profile(1.0, 1.02, 0.0, 0.1, 20.0)
+    np.testing.assert_allclose(kink.times, [1.0, 1.005, 1.02])
+    np.testing.assert_allclose(kink.omegas, [0.0, 0.1, 0.1])
+    hold = drive_profile(1.0, 1.02, -3.0, -3.0, 20.0)
+    np.testing.assert_allclose(hold.omegas, [-3.0, -3.0])
+    down = drive_profile(0.0, 0.5, 2.0, -2.0, 4.0)
+    np.testing.assert_allclose(down.omegas, [2.0, 0.0])
+    # a change below the resolution of t0 is taken at once instead of failing
+    tiny = drive_profile(1.0e6, 1.0e6 + 0.02, 0.0, 1.0e-14, 20.0)
+    assert tiny.omega(1.0e6 + 0.01) == 1.0e-14
+
+
+def test_target_is_clamped_to_the_maximum_angular_velocity() -> None:
+    eng = engine(dt=0.05)
+    eng.command(-50.0)
+    peak = 0.0
+    for _ in range(20):
+        res = eng.tick()
+        assert res.target_omega == -10.0
+        peak = min(peak, res.omega)
+        assert abs(res.omega) <= 10.0
+    assert peak == -10.0
+
+
+def test_runtime_reduction_of_the_limit_decelerates_within_the_acceleration_limit() -> None:
+    eng = engine(dt=0.05)
+    eng.command(10.0)
+    for _ in range(12):
+        eng.tick()
+    assert eng.omega == pytest.approx(10.0)
+    eng.reconfigure(drive=DriveParams(max_angular_velocity=5.0, max_angular_acceleration=20.0,
+                                      cmd_timeout=0.0))
+    assert eng.tick().omega == pytest.approx(9.0)
+    assert eng.tick().omega == pytest.approx(8.0)
+
+
+def test_cmd_timeout_ramps_to_rest_and_zero_holds() -> None:
+    drive = DriveParams(max_angular_velocity=10.0, max_angular_acceleration=20.0,
+                        cmd_timeout=0.1)
+    eng = engine(dt=0.02, drive=drive)
+    eng.command(2.0)
+    modes = []
+    omegas = []
+    for _ in range(20):
+        res = eng.tick()
+        modes.append(res.mode)
+        omegas.append(res.omega)
+    # command applied at t = 0; ticks starting at t0 >= 0.1 s have timed out
+    assert modes[:5] == ['command'] * 5 and modes[5:] == ['timeout'] * 15
+    assert max(omegas) == pytest.approx(2.0)
+    assert np.all(np.abs(np.diff(omegas)) <= 20.0 * 0.02 + 1e-12)
+    assert omegas[-1] == 0.0
+    # a new command revives the drive
+    eng.command(1.0)
+    assert eng.tick().mode == 'command'
+    hold = engine(dt=0.02, drive=DriveParams(cmd_timeout=0.0))
+    hold.command(2.0)
+    for _ in range(100):
+        res = hold.tick()
+    assert res.mode == 'command' and res.omega == pytest.approx(2.0)
+
+
+def test_open_loop_pattern_loops_until_the_first_command() -> None:
+    drive = DriveParams(max_angular_velocity=10.0, max_angular_acceleration=1.0e4,
+                        cmd_timeout=0.0, pattern=((0.1, 3.0), (0.05, -2.0)))
+    assert drive.period == pytest.approx(0.15)
+    eng = engine(dt=0.01, drive=drive)
+    targets = [eng.tick().target_omega for _ in range(45)]
+    expected = ([3.0] * 10 + [-2.0] * 5) * 3
+    assert targets == expected
+    assert eng.omega == -2.0
+    eng.command(0.5)
+    res = eng.tick()
+    assert (res.mode, res.target_omega) == ('command', 0.5)
+    # the pattern does not come back after the commands stop: the timeout stops the cone
+    empty = engine(dt=0.01, drive=DriveParams(pattern=()))
+    res = empty.tick()
+    assert (res.mode, res.target_omega, res.omega) == ('pattern', 0.0, 0.0)
+
+
+def test_pattern_from_flat() -> None:
+    assert pattern_from_flat([1.0, -2.0, 3.0, 4.0]) == ((1.0, -2.0), (3.0, 4.0))
+    assert pattern_from_flat([]) == ()
+    with pytest.raises(ParameterError, match='pairs'):
+        pattern_from_flat([1.0, 2.0, 3.0])
+
+
+@pytest.mark.parametrize('kwargs, fragment', [
+    ({'max_angular_velocity': 0.0}, 'max_angular_velocity'),
+    ({'max_angular_acceleration': float('inf')}, 'must be finite'),
+    ({'cmd_timeout': -1.0}, 'cmd_timeout'),
+    ({'pattern': ((0.0, 1.0),)}, r'pattern\[0\] duration'),
+    ({'pattern': ((1.0, 1.0, 2.0),)}, 'must be a pair'),
+    ({'pattern': ((1.0, 1.0e3),)}, r'pattern\[0\] omega'),
+])
+def test_drive_validation_names_the_problem(kwargs: dict, fragment: str) -> None:
+    with pytest.raises(ParameterError, match=fragment):
+        DriveParams(**kwargs)
+
+
+@pytest.mark.parametrize('kwargs, fragment', [
+    ({'rate': -1.0}, 'feed.rate'),
+    ({'rho_min': 0.1, 'rho_max': 0.05}, 'must not exceed'),
+    ({'d_values': (1.0, -5.0)}, r'feed.d_values\[1\]'),
+    ({'mass_rel_std': 2.0}, 'feed.mass_rel_std'),
+    ({'max_pieces': 0}, 'feed.max_pieces'),
+    ({'max_pieces': 2.5}, 'integer'),
+])
+def test_feed_validation_names_the_problem(kwargs: dict, fragment: str) -> None:
+    with pytest.raises(ParameterError, match=fragment):
+        FeedParams(**kwargs)
+
+
+def test_config_validation() -> None:
+    with pytest.raises(ParameterError, match='inside the cone'):
+        EngineConfig(feed=FeedParams(rho_max=0.3))
+    with pytest.raises(ParameterError, match="'dt'"):
+        EngineConfig(dt=0.0)
+    with pytest.raises(ParameterError, match='seed'):
+        EngineConfig(seed=-1)
+    with pytest.raises(ScenarioError, match='initial piece 1: .*outside the cone'):
+        EngineConfig(initial_pieces=(PieceSpec((0.0, 0.0, 0.05)), PieceSpec((0.3, 0.0, 0.0))))
+
+
+def test_spawn_and_command_refusals_keep_the_engine_running() -> None:
+    eng = engine(dt=0.01)
+    bad_spawns = [
+        ([[0.3, 0.0, 0.01]], 'outside the cone'),
+        ([[0.1, 0.0, 0.0]], 'below the cone surface'),
+        ([[0.1, float('nan'), 0.05]], 'not finite'),
+        ([[0.1, 0.0]], 'shape'),
+        (np.zeros((0, 3)), 'at least one'),
+    ]
+    for positions, fragment in bad_spawns:
+        with pytest.raises(ScenarioError, match=fragment):
+            eng.spawn(positions)
+    with pytest.raises(ScenarioError, match='velocity'):
+        eng.spawn([[0.1, 0.0, 0.05]], velocities=[[0.0, 0.0]])
+    for value in (float('nan'), float('inf'), '1.0', True):
+        with pytest.raises(ParameterError, match='rotation command'):
+            eng.command(value)  # type: ignore[arg-type]
+    with pytest.raises(ParameterError, match='inside the cone'):
+        eng.reconfigure(feed=FeedParams(rho_max=1.0))
+    assert eng.pending == ()
+    eng.spawn([[0.1, 0.0, 0.05], [0.0, 0.1, 0.05]])
+    res = eng.tick()
+    assert res.count == 2 and list(res.spawned_ids) == [0, 1]
+    assert res.positions.shape == (2, 3)
+
+
+def test_inputs_are_applied_at_the_next_tick_in_arrival_order() -> None:
+    eng = engine(dt=0.01)
+    eng.command(1.0)
+    eng.command(-1.0)
+    eng.spawn([resting(0.1, 0.0)])
+    eng.reset()
+    eng.spawn([resting(0.0, 0.1)])
+    assert [type(p) for p in eng.pending] == [RotationCommand, RotationCommand,
+                                              SpawnRequest, ResetRequest, SpawnRequest]
+    assert eng.piece_count == 0
+    res = eng.tick()
+    assert res.reset
+    assert [type(p) for p in res.applied] == [RotationCommand, RotationCommand, SpawnRequest,
+                                              ResetRequest, SpawnRequest]
+    # the reset removed the first piece and forgot the commands; the second piece stays
+    assert list(res.ids) == [1] and list(res.spawned_ids) == [0, 1]
+    assert res.mode == 'pattern' and eng.pending == ()
+
+
+def test_spawned_pieces_move_as_requested() -> None:
+    eng = engine(dt=0.01)
+    eng.command(5.0)
+    for _ in range(10):
+        eng.tick()
+    eng.spawn([resting(0.1, 0.0)])
+    eng.spawn([resting(0.1, 0.0)], velocities=[[0.0, 0.0, 0.0]])
+    res = eng.tick()
+    assert res.count == 2
+    # the carried piece keeps up with the surface, the dropped one lags behind
+    carried, dropped = res.velocities
+    assert carried[1] == pytest.approx(res.omega * 0.1, rel=0.05)
+    assert dropped[1] < carried[1] - 0.05
+
+
+def run_with_inputs(config: EngineConfig, schedule: dict[int, list]) -> list:
+    eng = FeederEngine(config)
+    results = []
+    for k in range(70):
+        for item in schedule.get(k, []):
+            eng.submit(item)
+        results.append(eng.tick())
+    return results
+
+
+def busy_config(seed: int = 7) -> EngineConfig:
+    return EngineConfig(
+        dt=0.02, seed=seed, initial_pieces=table_i_pieces(),
+        drive=DriveParams(max_angular_velocity=10.47, max_angular_acceleration=40.0,
+                          cmd_timeout=1.0, pattern=((1.0, -10.47), (1.0, 10.47))),
+        feed=FeedParams(rate=40.0, mass_rel_std=0.3, d_values=(30.0, 750.0)))
+
+
+def test_run_is_reproducible_from_config_and_tick_indexed_inputs() -> None:
+    schedule = {
+        5: [SpawnRequest(np.array([resting(0.05, 0.05)]))],
+        20: [Reconfigure(feed=FeedParams(rate=10.0, rho_min=0.1, rho_max=0.12))],
+        40: [RotationCommand(10.0)],
+        50: [ResetRequest(), RotationCommand(-6.0)],
+        61: [RotationCommand(2.0), SpawnRequest(np.array([resting(-0.1, 0.0)]),
+                                                np.zeros((1, 3)))],
+    }
+    first = run_with_inputs(busy_config(), schedule)
+    assert sum(len(r.exits) for r in first) > 0
+    assert sum(len(r.feed_ids) for r in first) > 0
+    # replay from the log of applied inputs
+    log = {r.index: list(r.applied) for r in first if r.applied}
+    assert sorted(log) == sorted(schedule)
+    second = run_with_inputs(busy_config(), log)
+    for a, b in zip(first, second):
+        assert a.t == b.t and a.angle == b.angle and a.omega == b.omega
+        np.testing.assert_array_equal(a.ids, b.ids)
+        np.testing.assert_array_equal(a.positions, b.positions)
+        np.testing.assert_array_equal(a.velocities, b.velocities)
+        np.testing.assert_array_equal(a.masses, b.masses)
+        np.testing.assert_array_equal(a.exits.ids, b.exits.ids)
+        np.testing.assert_array_equal(a.exits.t, b.exits.t)
+        np.testing.assert_array_equal(a.channel_mass, b.channel_mass)
+    # another seed gives another feed
+    third = run_with_inputs(busy_config(seed=8), schedule)
+    assert not all(np.array_equal(a.masses, b.masses) for a, b in zip(first, third))
+
+
+def test_feed_is_seeded_and_follows_its_parameters() -> None:
+    feed = FeedParams(rate=5000.0, rho_min=0.05, rho_max=0.12, drop_height=0.04,
+                      mass_rel_std=0.25, d_values=(30.0, 750.0), max_pieces=100_000)
+    config = EngineConfig(dt=0.02, seed=3, feed=feed)
+    eng = FeederEngine(config)
+    res = [eng.tick() for _ in range(3)]
+    ids = np.concatenate([r.feed_ids for r in res])
+    counts = [len(r.feed_ids) for r in res]
+    # Poisson(100) per tick: 3 draws far inside 100 +- 40
+    assert all(60 <= c <= 140 for c in counts)
+    again = FeederEngine(config)
+    assert [len(again.tick().feed_ids) for _ in range(3)] == counts
+    products = eng.state.products
+    first_tick = res[0].feed_ids
+    assert len(ids) == sum(counts)
+    masses = products[:, 0]
+    d = products[:, 1]
+    assert set(np.unique(d)) == {30.0, 750.0}
+    assert np.mean(masses) == pytest.approx(MODEL.product.m, rel=0.05)
+    assert np.std(masses) / MODEL.product.m == pytest.approx(0.25, rel=0.2)
+    # drop positions of the first tick, at the start of the tick (inputs of tick 0)
+    fresh = FeederEngine(config)
+    state_before = fresh.state
+    assert state_before.count == 0
+    fresh._feed_pieces()  # the generator's first draws, as in tick 0
+    q = fresh.state.y[:, 0:3]  # cone axes = world axes at angle 0
+    rho = np.hypot(q[:, 0], q[:, 1])
+    assert len(q) == len(first_tick)
+    assert np.all((rho >= 0.05) & (rho <= 0.12))
+    np.testing.assert_allclose(q[:, 2], MODEL.h * (1 - rho / MODEL.r) + 0.04)
+    np.testing.assert_allclose(fresh.state.y[:, 3:6], 0.0)  # dropped: at rest in the world
+
+
+def test_feed_pauses_at_max_pieces() -> None:
+    eng = FeederEngine(EngineConfig(dt=0.02, feed=FeedParams(rate=2000.0, max_pieces=10)))
+    counts = [eng.tick().count for _ in range(3)]
+    assert max(counts) <= 10 and counts[0] == 10
+
+
+def test_reset_restores_the_start_and_keeps_time_and_ids_running() -> None:
+    config = busy_config()
+    eng = FeederEngine(config)
+    start = [eng.tick() for _ in range(25)]
+    assert sum(len(r.exits) for r in start) > 0
+    assert start[-1].channel_mass.sum() > 0
+    eng.reset()
+    after = [eng.tick() for _ in range(25)]
+    assert after[0].reset and after[0].t0 == pytest.approx(25 * 0.02)
+    assert eng.t == pytest.approx(50 * 0.02)
+    assert after[0].ids.min() > start[-1].ids.max() if start[-1].count else True
+    # the run after the reset repeats the first one (time shifted, ids offset)
+    for a, b in zip(start, after):
+        assert a.count == b.count
+        assert a.omega == pytest.approx(b.omega, abs=1e-9)
+        assert a.angle == pytest.approx(b.angle, abs=1e-9)
+        np.testing.assert_allclose(a.positions, b.positions, atol=1e-7)
+        np.testing.assert_allclose(a.channel_mass, b.channel_mass, atol=1e-12)
+        np.testing.assert_allclose(a.masses, b.masses)
+
+
+def test_channel_mass_is_the_sum_of_the_exit_events() -> None:
+    eng = FeederEngine(busy_config())
+    total = np.zeros(MODEL.channels.count)
+    exits = 0
+    for _ in range(50):
+        res = eng.tick()
+        for channel, mass in zip(res.exits.channel, res.exits.mass):
+            total[channel - 1] += mass
+            exits += 1
+        np.testing.assert_allclose(res.channel_mass, total, rtol=0, atol=1e-12)
+        assert np.all(res.exits.t > res.t0) and np.all(res.exits.t <= res.t)
+        assert np.all(np.hypot(res.exits.position[:, 0], res.exits.position[:, 1])
+                      == pytest.approx(MODEL.r, abs=1e-6))
+    assert exits >= 5
+
+
+def test_world_states_match_the_cone_surface_at_rest() -> None:
+    eng = FeederEngine(EngineConfig(dt=0.02, initial_pieces=(
+        PieceSpec(resting(0.1, 0.02)), PieceSpec(resting(-0.05, -0.1)))))
+    for _ in range(10):
+        res = eng.tick()
+    assert res.count == 2 and list(res.ids) == [0, 1]
+    np.testing.assert_allclose(res.positions, [resting(0.1, 0.02), resting(-0.05, -0.1)],
+                               atol=2e-4)
+    np.testing.assert_allclose(res.velocities, 0.0, atol=1e-3)
+    assert math.isclose(res.masses[0], MODEL.product.m)

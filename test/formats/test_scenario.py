@@ -1,0 +1,103 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Tests of formats.scenario_file: valid scenarios load, malformed ones are refused."""
+
+import math
+from pathlib import Path
+
+from cone_feeder_sim.errors import ScenarioError
+from cone_feeder_sim.formats.scenario_file import load_scenario, scenario_from_mapping
+from cone_feeder_sim.physics.model import activation
+from cone_feeder_sim.physics.params import ModelParams, ProductParams
+from cone_feeder_sim.physics.simulation import resting_height
+import pytest
+
+VALID = {
+    'duration': 4.0,
+    'model': {'d': 225.0},
+    'rotation': [[0.0, 0.0], [0.4, -10.47], [2.0, 10.47]],
+    'particles': [
+        {'position': [0.11, -0.01, 0.03], 'velocity': [0.0, 0.0, 0.0], 'd': 135.0},
+        {'position': [0.05, 0.05, 0.0], 'on_surface': True, 'm': 0.2},
+    ],
+}
+
+
+def test_valid_scenario() -> None:
+    sc = scenario_from_mapping(VALID)
+    assert sc.duration == 4.0 and sc.model.product.d == 225.0
+    assert sc.particles[0].product.d == 135.0 and sc.particles[0].velocity == (0.0, 0.0, 0.0)
+    assert sc.particles[1].product.m == 0.2 and sc.particles[1].product.d == 225.0
+    assert sc.particles[1].velocity is None
+    assert sc.rotation.omega(1.2) == pytest.approx(0.0)
+
+
+def test_on_surface_places_the_piece_at_its_resting_gap() -> None:
+    model = ModelParams()
+    product = ProductParams(m=0.2)
+    z = resting_height(model, product, 0.05, 0.05)
+    gap = z - model.h * (1.0 - math.hypot(0.05, 0.05) / model.r)
+    # at rest R_a r_f / 2 = m g cos^2(tilt)
+    expected = 0.2 * 9.81 * math.cos(math.radians(7.5)) ** 2 / 60.0
+    assert activation(gap, product.r_t, product.r_c) == pytest.approx(expected, rel=1e-12)
+    assert scenario_from_mapping(VALID).particles[1].position[2] == pytest.approx(z)
+
+
+@pytest.mark.parametrize('change, fragment', [
+    ({'duration': -1.0}, 'duration must be a positive number'),
+    ({'duration': float('nan')}, 'duration must be a positive number'),
+    ({'speed': 3}, "unknown scenario key(s) 'speed'"),
+    ({'model': {'d': -3.0}}, "parameter 'd' = -3 is out of range"),
+    ({'model': {'mu': 0.5}}, "unknown parameter(s) 'mu'"),
+    ({'rotation': [[1.0, 0.0], [0.5, 1.0]]}, 'strictly increasing'),
+    ({'rotation': 'fast'}, 'rotation must be a number'),
+    ({'particles': []}, 'particles must be a non-empty list'),
+    ({'particles': [{'position': [0.3, 0.0, 0.0]}]}, 'particles[0]: position[0]'),
+    ({'particles': [{'position': [0.1, 0.0]}]}, 'particles[0].position must be a list of 3'),
+    ({'particles': [{'position': [0.1, 0.0, 0.05], 'velocity': [0, 0, float('inf')]}]},
+     'particles[0].velocity must be finite'),
+    ({'particles': [{'position': [0.1, 0.0, 0.05], 'mass': 1.0}]},
+     "particles[0]: unknown key(s) 'mass'"),
+    ({'particles': [{'position': [0.1, 0.0, 0.05], 'm': 0.0}]},
+     "particles[0]: parameter 'm' = 0 is out of range"),
+    ({'particles': [{'velocity': [0.0, 0.0, 0.0]}]}, 'particles[0] has no position'),
+    ({'solver': {'rtol': 2.0}}, "parameter 'rtol' = 2 is out of range"),
+])
+def test_malformed_scenarios_name_the_problem(change: dict, fragment: str) -> None:
+    content = {**VALID, **change}
+    with pytest.raises(ScenarioError) as info:
+        scenario_from_mapping(content)
+    assert fragment in str(info.value)
+
+
+def test_missing_keys_and_files(tmp_path: Path) -> None:
+    with pytest.raises(ScenarioError, match="missing the key 'rotation'"):
+        scenario_from_mapping({'duration': 1.0, 'particles': [{'position': [0, 0, 0.1]}]})
+    with pytest.raises(ScenarioError, match='cannot read'):
+        load_scenario(tmp_path / 'nope.yaml')
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('duration: [1\n')
+    with pytest.raises(ScenarioError, match='bad.yaml'):
+        load_scenario(bad)
+
+
+def test_parameter_file_relative_to_the_scenario(tmp_path: Path) -> None:
+    (tmp_path / 'p.yaml').write_text('d: 30.0\nmu_C: 0.5\n')
+    (tmp_path / 's.yaml').write_text(
+        'duration: 1.0\nparameters: p.yaml\nrotation: 2.0\n'
+        'particles:\n  - position: [0.1, 0.0, 0.05]\n')
+    sc = load_scenario(tmp_path / 's.yaml')
+    assert sc.model.product.d == 30.0 and sc.model.product.mu_C == 0.5
+    assert sc.model.product.mu_S == 0.99  # the rest from Table II defaults

@@ -1,0 +1,428 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""In-process tests of sim_node: an isolated rclpy Context and executor per test."""
+
+from collections.abc import Callable, Iterator
+from dataclasses import fields
+import math
+from pathlib import Path
+import time
+from typing import Any
+
+from cone_feeder_sim.errors import ParameterError, ScenarioError
+from cone_feeder_sim.formats.cdr import decode
+from cone_feeder_sim.formats.pointcloud import EXIT_DTYPE, STATE_DTYPE
+from cone_feeder_sim.formats.topics import MessageRecord
+from cone_feeder_sim.physics.params import SolverParams
+from cone_feeder_sim.ros.parameters import parameter_specs
+from cone_feeder_sim.ros.sim_node import SimNode
+import numpy as np
+import pytest
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+import sim_process
+from std_msgs.msg import Float64
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
+import yaml
+
+CONFIG = Path(__file__).resolve().parents[2] / 'config' / 'sim_node.yaml'
+
+
+class Ros(sim_process.InProcess):
+    """A private context, executor and helper node for one test."""
+
+    def __init__(self) -> None:
+        super().__init__('test_client', timeout=20.0, spin_step=0.02)
+
+    def sim(self, namespace: str = '', **params: Any) -> SimNode:
+        params.setdefault('record_path', '')  # no runs/ directory in the working directory
+        # an empty list cannot be typed in rclpy; NOT_SET is what `[]` in a YAML file gives
+        overrides = [Parameter(k) if v == [] else Parameter(k, value=v)
+                     for k, v in params.items()]
+        return self.add(SimNode(context=self.context, parameter_overrides=overrides,
+                                namespace=namespace))
+
+    def call(self, srv_type: Any, name: str, request: Any) -> Any:
+        return super().call(srv_type, name, request, timeout=20.0, ready_timeout=10.0)
+
+
+@pytest.fixture
+def ros() -> Iterator[Ros]:
+    with Ros() as harness:
+        yield harness
+
+
+def pause(ros: Ros, sim: SimNode) -> None:
+    response = ros.call(SetBool, f'{sim.get_fully_qualified_name()}/pause',
+                        SetBool.Request(data=True))
+    assert response.success and sim.paused
+
+
+def step(ros: Ros, sim: SimNode) -> Trigger.Response:
+    return ros.call(Trigger, f'{sim.get_fully_qualified_name()}/step', Trigger.Request())
+
+
+def flatten(tree: dict, prefix: str = '') -> dict[str, Any]:
+    flat = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            flat.update(flatten(value, f'{prefix}{key}.'))
+        else:
+            flat[f'{prefix}{key}'] = value
+    return flat
+
+
+def test_defaults_are_the_default_config_file(ros: Ros) -> None:
+    sim = ros.sim()
+    content = yaml.safe_load(CONFIG.read_text())
+    params = flatten(content['/**/sim_node']['ros__parameters'])
+    assert len(params) > 20
+    # the harness turns recording off; the file has the built-in default
+    defaults = {spec.name: spec.default for spec in parameter_specs()}
+    assert params.pop('record_path') == defaults['record_path']
+    for name, value in params.items():
+        actual = sim.get_parameter(name).value
+        if isinstance(value, list):
+            assert list(actual) == value, name
+        else:
+            assert actual == value, name
+    # every setting of the integrator is a parameter, with its default in the file
+    solver = {n for n in params if n.startswith('solver.')}
+    assert solver == {f'solver.{f.name}' for f in fields(SolverParams)}
+    assert sim.engine.piece_count == 5
+    np.testing.assert_allclose(sim.engine.state.products[:, 1], [225, 135, 750, 750, 30])
+
+
+def test_parameters_have_descriptions_ranges_and_read_only_flags(ros: Ros) -> None:
+    sim = ros.sim()
+    specs = {s.name: s for s in parameter_specs()}
+    names = set(specs)
+    assert {'model.d', 'model.cone_diameter', 'model.channel_count', 'solver.rtol',
+            'feed.rate', 'real_time_factor', 'open_loop_pattern'} <= names
+    for name in names:
+        descriptor = sim.describe_parameter(name)
+        assert descriptor.description, name
+        assert descriptor.read_only == (not specs[name].dynamic), name
+    assert sim.describe_parameter('model.d').read_only
+    assert not sim.describe_parameter('feed.rate').read_only
+    rng = sim.describe_parameter('max_angular_acceleration').floating_point_range[0]
+    assert (rng.from_value, rng.to_value) == (0.0, 1.0e4)
+    assert sim.describe_parameter('model.channel_count').integer_range[0].to_value == 360
+
+
+@pytest.mark.parametrize('name, value, fragment', [
+    ('max_angular_acceleration', 0.0, 'max_angular_acceleration'),
+    ('feed.rho_max', 0.3, 'inside the cone'),
+    ('feed.rho_min', 0.2, 'must not exceed'),
+    ('open_loop_pattern', [1.0, 2.0, 3.0], 'pairs'),
+    ('open_loop_pattern', [0.0, 2.0], 'duration'),
+    ('real_time_factor', 500.0, 'range'),
+    ('model.d', 100.0, 'read-only'),
+    ('update_rate', 100.0, 'read-only'),
+    ('feed.rate', 'fast', 'type'),
+])
+def test_invalid_runtime_parameters_are_refused_with_a_reason(
+        ros: Ros, name: str, value: Any, fragment: str) -> None:
+    sim = ros.sim()
+    before = sim.get_parameter(name).value
+    result = sim.set_parameters([Parameter(name, value=value)])[0]
+    assert not result.successful
+    assert fragment in result.reason
+    assert sim.get_parameter(name).value == before
+    assert sim.engine.pending == ()
+
+
+def test_runtime_parameters_take_effect(ros: Ros) -> None:
+    sim = ros.sim(real_time_factor=1.0)
+    assert sim._tick_timer.timer_period_ns == 20_000_000
+    results = sim.set_parameters([
+        Parameter('real_time_factor', value=2.0), Parameter('feed.rate', value=7.0),
+        Parameter('max_angular_velocity', value=3.0),
+        Parameter('open_loop_pattern', value=[1.0, 2.0])])
+    assert all(r.successful for r in results)
+    assert sim._tick_timer.timer_period_ns == 10_000_000
+    pause(ros, sim)
+    step(ros, sim)
+    assert sim.engine.feed.rate == 7.0
+    assert sim.engine.drive.max_angular_velocity == 3.0
+    assert sim.engine.drive.pattern == ((1.0, 2.0),)
+    assert sim.last_tick.target_omega == 2.0
+    # 0: as fast as possible
+    assert sim.set_parameters([Parameter('real_time_factor', value=0.0)])[0].successful
+    assert sim._tick_timer.timer_period_ns == 0
+    sim.set_paused(False)
+    index = sim.engine.tick_index
+    assert ros.spin_until(lambda: sim.engine.tick_index >= index + 20)
+
+
+@pytest.mark.parametrize('params, error, fragment', [
+    ({'feed.rho_max': 0.3}, ParameterError, 'inside the cone'),
+    ({'initial_pieces.positions': [0.3, 0.0, 0.0], 'initial_pieces.d': []}, ScenarioError,
+     'outside the cone'),
+    ({'initial_pieces.positions': [0.1, 0.0]}, ParameterError, 'triples'),
+    ({'initial_pieces.d': [1.0]}, ParameterError, 'one per piece'),
+    ({'model.m': 0.0}, ParameterError, "'m'"),
+    ({'model.normal_force': 'magic'}, ParameterError, 'normal_force'),
+    ({'update_rate': 0.0}, InvalidParameterValueException, 'update_rate'),
+])
+def test_invalid_start_configuration_is_refused(ros: Ros, params: dict, error: type,
+                                                fragment: str) -> None:
+    with pytest.raises(error, match=fragment):
+        ros.sim(**params)
+
+
+def test_model_parameters_override_the_parameter_file(ros: Ros, tmp_path: Path) -> None:
+    table = tmp_path / 'model.yaml'
+    table.write_text('cone_diameter: 0.5\nm: 0.2\nchannel_count: 10\n')
+    sim = ros.sim(**{'parameter_file': str(table), 'model.m': 0.3,
+                     'initial_pieces.positions': [0.1, 0.0, 0.05], 'initial_pieces.d': [],
+                     'feed.rate': 0.0})
+    assert sim.get_parameter('model.cone_diameter').value == 0.5
+    assert sim.engine.model.r == 0.25
+    assert sim.engine.model.product.m == 0.3
+    assert sim.engine.model.channels.count == 10
+    assert sim.engine.state.products[0, 0] == 0.3
+
+
+def collect(sim: SimNode) -> list[MessageRecord]:
+    records: list[MessageRecord] = []
+    sim.add_message_hook(records.append)
+    return records
+
+
+def latest(records: list[MessageRecord], topic: str) -> dict[str, Any]:
+    for record in reversed(records):
+        if record.topic == topic:
+            return decode(record.type_name, record.data)
+    raise AssertionError(f'nothing published on {topic}')
+
+
+def test_published_messages_carry_the_engine_state(ros: Ros) -> None:
+    sim = ros.sim(namespace='/feeder1', real_time_factor=0.0, publish_clock=True)
+    records = collect(sim)
+    assert ros.spin_until(lambda: sim.engine.tick_index >= 120 and sum(
+        r.topic == '/feeder1/exit_events' for r in records) >= 2, 60.0)
+    pause(ros, sim)
+    res = sim.last_tick
+    sec, nanosec = divmod(round(res.t * 1e9), 1_000_000_000)
+    stamp = {'sec': sec, 'nanosec': nanosec}
+    particles = latest(records, '/feeder1/particles')
+    assert particles['header'] == {'stamp': stamp, 'frame_id': 'feeder'}
+    poses = np.array([[p['position'][k] for k in 'xyz'] for p in particles['poses']])
+    np.testing.assert_array_equal(poses, res.positions)
+    assert all(p['orientation']['w'] == 1.0 for p in particles['poses'])
+    states = latest(records, '/feeder1/particle_states')
+    assert [f['name'] for f in states['fields']] == list(STATE_DTYPE.names)
+    cloud = np.frombuffer(states['data'], dtype=STATE_DTYPE)
+    assert states['width'] == res.count == len(cloud)
+    np.testing.assert_array_equal(cloud['id'], res.ids)
+    np.testing.assert_allclose(cloud['vx'], res.velocities[:, 0], rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(cloud['mass'], res.masses, rtol=1e-6)
+    cone = latest(records, '/feeder1/cone_state')
+    assert cone['name'] == ['cone']
+    assert cone['position'][0] == res.angle and cone['velocity'][0] == res.omega
+    clock = latest(records, '/clock')
+    assert clock['clock'] == stamp
+    first_clock = next(decode(r.type_name, r.data) for r in records if r.topic == '/clock')
+    assert first_clock['clock'] == {'sec': 0, 'nanosec': 20_000_000}
+    # exit events agree with the channel masses
+    total = np.zeros(14)
+    exits = 0
+    for record in records:
+        if record.topic == '/feeder1/exit_events':
+            msg = decode(record.type_name, record.data)
+            rows = np.frombuffer(msg['data'], dtype=EXIT_DTYPE)
+            assert msg['width'] == len(rows) > 0
+            np.add.at(total, rows['channel'].astype(int) - 1, rows['mass'])
+            exits += len(rows)
+            np.testing.assert_allclose(np.hypot(rows['x'], rows['y']), 0.225, atol=1e-6)
+            np.testing.assert_allclose(rows['angle'], np.arctan2(rows['y'], rows['x']))
+    channel = latest(records, '/feeder1/channel_mass')
+    assert channel['layout']['dim'] == [{'label': 'channel', 'size': 14, 'stride': 14}]
+    np.testing.assert_allclose(channel['data'], total, rtol=0, atol=1e-12)
+    assert exits == sim._total_exits
+
+
+def test_pause_step_and_reset_services(ros: Ros) -> None:
+    sim = ros.sim(real_time_factor=0.0)
+    name = sim.get_fully_qualified_name()
+    refused = step(ros, sim)
+    assert not refused.success and 'not paused' in refused.message
+    pause(ros, sim)
+    index = sim.engine.tick_index
+    # while paused, nothing ticks
+    ros.spin_until(lambda: False, 0.2)
+    assert sim.engine.tick_index == index
+    for k in range(3):
+        response = step(ros, sim)
+        assert response.success
+        assert sim.engine.tick_index == index + k + 1
+    reset = ros.call(Trigger, f'{name}/reset', Trigger.Request())
+    assert reset.success and 'next tick' in reset.message
+    assert sim.engine.pending
+    step(ros, sim)
+    assert sim.last_tick.reset and sim.last_tick.count == 5
+    assert sim.last_tick.channel_mass.sum() == 0.0
+    resume = ros.call(SetBool, f'{name}/pause', SetBool.Request(data=False))
+    assert resume.success and not sim.paused
+    assert ros.spin_until(lambda: sim.engine.tick_index > index + 10)
+
+
+def publish_until(ros: Ros, topic: str, msg: Any, condition: Callable[[], bool]) -> bool:
+    pub = ros.client.create_publisher(type(msg), topic, 10)
+    end = time.monotonic() + 20.0
+    while time.monotonic() < end:
+        pub.publish(msg)
+        if ros.spin_until(condition, 0.3):
+            return True
+    return False
+
+
+#: The spawn messages of these tests.
+poses = sim_process.pose_array
+
+
+def test_spawn_accepts_valid_poses_and_refuses_others(ros: Ros) -> None:
+    sim = ros.sim(**{'feed.rate': 0.0, 'initial_pieces.positions': [0.1, 0.0, 0.05],
+                     'initial_pieces.d': []})
+    records = collect(sim)
+    pause(ros, sim)
+    bad_frame = poses((0.05, 0.0, 0.05), frame='map')
+    assert publish_until(ros, 'spawn', bad_frame, lambda: sim._refused >= 1)
+    mixed = poses((0.05, 0.0, 0.05), (0.5, 0.0, 0.05), (0.0, 0.05, -0.01),
+                  (float('nan'), 0.0, 0.1), (-0.05, 0.02, 0.06), frame='')
+    assert publish_until(ros, 'spawn', mixed, lambda: len(sim.engine.pending) >= 1)
+    assert sim._refused >= 4
+    step(ros, sim)
+    res = sim.last_tick
+    np.testing.assert_allclose(res.positions[0, 0], 0.1, atol=1e-3)
+    spawned = res.ids[1:]
+    assert len(spawned) % 2 == 0 and len(spawned) >= 2  # one valid pair per delivery
+    # dropped at rest: they have fallen for at most one tick (g dt^2 / 2 = 2 mm)
+    np.testing.assert_allclose(res.positions[1], [0.05, 0.0, 0.05], atol=2.5e-3)
+    np.testing.assert_allclose(res.positions[2], [-0.05, 0.02, 0.06], atol=2.5e-3)
+    received = [r for r in records if r.direction == 'in']
+    assert received and received[0].topic == '/spawn'
+    assert decode(received[0].type_name, received[0].data)['header']['frame_id'] == 'map'
+
+
+def test_rotation_commands_are_followed_and_non_finite_refused(ros: Ros) -> None:
+    sim = ros.sim(real_time_factor=0.0, max_angular_acceleration=50.0)
+    records = collect(sim)
+    assert publish_until(ros, 'rotation_cmd', Float64(data=math.nan),
+                         lambda: sim._refused >= 1)
+    assert publish_until(ros, 'rotation_cmd', Float64(data=math.inf),
+                         lambda: sim._refused >= 2)
+    assert publish_until(ros, 'rotation_cmd', Float64(data=4.0),
+                         lambda: sim.last_tick is not None and sim.last_tick.mode == 'command'
+                         and sim.last_tick.omega == pytest.approx(4.0))
+    omegas = [decode(r.type_name, r.data)['velocity'][0] for r in records
+              if r.topic == '/cone_state']
+    assert max(np.abs(np.diff(omegas))) <= 50.0 * 0.02 + 1e-9
+    commands = [decode(r.type_name, r.data)['data'] for r in records if r.direction == 'in']
+    assert math.isnan(commands[0]) and 4.0 in commands
+
+
+def test_late_joiners_get_the_static_scene_and_channel_mass(ros: Ros) -> None:
+    sim = ros.sim(real_time_factor=0.0)
+    assert ros.spin_until(lambda: sim.engine.tick_index >= 30)
+    pause(ros, sim)
+    got: list[MarkerArray] = []
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    ros.client.create_subscription(MarkerArray, 'markers', got.append, latched)
+    assert ros.spin_until(lambda: bool(got))
+    namespaces = {m.ns for m in got[-1].markers}
+    assert {'cone', 'channels', 'channel_labels', 'pieces', 'cone_angle'} <= namespaces
+    labels = sorted(int(m.text) for m in got[-1].markers if m.ns == 'channel_labels')
+    assert labels == list(range(1, 15))
+    pieces = next(m for m in got[-1].markers if m.ns == 'pieces')
+    assert len(pieces.points) == sim.engine.piece_count
+
+
+def test_start_paused_waits_for_resume(ros: Ros) -> None:
+    sim = ros.sim(start_paused=True, real_time_factor=0.0)
+    assert sim.paused
+    ros.spin_until(lambda: False, 0.2)
+    assert sim.engine.tick_index == 0
+    response = ros.call(SetBool, f'{sim.get_fully_qualified_name()}/pause',
+                        SetBool.Request(data=False))
+    assert response.success and 'resumed' in response.message
+    assert ros.spin_until(lambda: sim.engine.tick_index >= 3)
+
+
+def test_clock_is_never_zero(ros: Ros) -> None:
+    sim = ros.sim(publish_clock=True, real_time_factor=0.0)
+    ticks: list[Clock] = []
+    ros.client.create_subscription(Clock, '/clock', ticks.append, 10)
+    assert ros.spin_until(lambda: len(ticks) >= 5)
+    assert all(c.clock.sec > 0 or c.clock.nanosec > 0 for c in ticks)
+    assert sim.get_parameter('publish_clock').value
+
+
+def test_diagnostics_warn_when_the_cpu_cannot_keep_up(ros: Ros) -> None:
+    sim = ros.sim(**{'update_rate': 1000.0, 'real_time_factor': 100.0,
+                     'diagnostics.period': 0.2})
+    records = collect(sim)
+
+    def warned() -> bool:
+        for r in records:
+            if r.topic == '/diagnostics':
+                status = decode(r.type_name, r.data)['status'][0]
+                if status['level'] == 1:  # WARN
+                    return True
+        return False
+
+    assert ros.spin_until(warned, 30.0)
+    status = next(decode(r.type_name, r.data)['status'][0] for r in records
+                  if r.topic == '/diagnostics'
+                  and decode(r.type_name, r.data)['status'][0]['level'] == 1)
+    assert 'cannot keep up' in status['message']
+    keys = {kv['key'] for kv in status['values']}
+    assert {'real-time factor (achieved)', 'step time mean (ms)', 'pieces',
+            'accepted steps', 'skipped periods'} <= keys
+    # missed timer periods are skipped, not caught up
+    assert any(int(kv['value']) > 0 for kv in status['values']
+               if kv['key'] == 'skipped periods')
+
+
+def test_a_stall_is_not_caught_up(ros: Ros) -> None:
+    sim = ros.sim(**{'feed.rate': 0.0, 'markers.rate': 0.0, 'diagnostics.period': 3600.0})
+    assert ros.spin_until(lambda: sim.engine.tick_index >= 5)
+    skipped = sim._window.skipped
+    time.sleep(0.5)  # the stall under test: 25 periods of 20 ms pass without the executor
+    index = sim.engine.tick_index
+    start = time.monotonic()
+    ros.spin_until(lambda: False, 0.2)
+    elapsed = time.monotonic() - start
+    # at most one tick per period from now on (a catch-up would run ~25 ticks at once)
+    assert sim.engine.tick_index - index <= elapsed / 0.02 + 2
+    assert sim._window.skipped - skipped >= 20
+
+
+def test_topics_are_relative_and_described_for_recording(ros: Ros) -> None:
+    sim = ros.sim(namespace='/line2')
+    topics = {t.topic: t for t in sim.topics()}
+    assert {'/line2/particles', '/line2/particle_states', '/line2/exit_events',
+            '/line2/channel_mass', '/line2/cone_state', '/line2/markers', '/diagnostics',
+            '/line2/rotation_cmd', '/line2/spawn', '/line2/sim_node/events'} == set(topics)
+    assert topics['/line2/exit_events'].qos.depth == 1000
+    assert topics['/line2/exit_events'].qos.reliability == 'reliable'
+    assert topics['/line2/markers'].qos.durability == 'transient_local'
+    assert topics['/line2/particle_states'].type_name == 'sensor_msgs/msg/PointCloud2'
+    assert topics['/line2/rotation_cmd'].direction == 'in'
