@@ -120,7 +120,7 @@ PRODUCT_LIMITS: dict[str, Limit] = {
 #: Ranges of the machine and model parameters shared by all pieces.
 MODEL_LIMITS: dict[str, Limit] = {
     'g': Limit(0.0, 100.0, 'm/s^2'),
-    'cone_diameter': Limit(0.0, 20.0, 'm', lo_open=True),
+    'cone_diameter': Limit(0.01, 20.0, 'm'),  # a cone of 1 cm or more: r = d / 2 never 0
     'cone_tilt': Limit(0.0, 60.0, 'deg'),
     'epsilon': Limit(0.0, 1.0, 'm/s', lo_open=True),
     'tip_epsilon': Limit(0.0, 0.1, 'm', lo_open=True),

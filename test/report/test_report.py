@@ -33,7 +33,6 @@ from cone_feeder_sim.cli import main
 from cone_feeder_sim.errors import ConeFeederError
 from cone_feeder_sim.errors import ReportError
 from cone_feeder_sim.formats.mcap_writer import McapRecorder
-from cone_feeder_sim.formats.pointcloud import cloud_points, point_dtype
 from cone_feeder_sim.physics.params import ChannelLayout, ModelParams
 from cone_feeder_sim.report.draw import build_figure, write_report
 from cone_feeder_sim.report.read import (
@@ -203,32 +202,6 @@ def sample(tmp_path_factory: pytest.TempPathFactory) -> tuple[SampleRun, Path]:
     path = tmp_path_factory.mktemp('report') / 'run.mcap'
     run.write(path)
     return run, path
-
-
-def test_point_dtype_matches_documented_layouts() -> None:
-    fields = [{'name': n, 'offset': o, 'datatype': d, 'count': 1} for n, o, d in STATE_FIELDS]
-    assert point_dtype(fields, 32) == STATE_DTYPE
-    fields = [{'name': n, 'offset': o, 'datatype': d, 'count': 1} for n, o, d in EXIT_FIELDS]
-    assert point_dtype(fields, 80) == EXIT_DTYPE
-    big = point_dtype([{'name': 'v', 'offset': 0, 'datatype': FLOAT64, 'count': 1}], 8, True)
-    assert big['v'] == np.dtype('>f8')
-    with pytest.raises(ReportError, match='does not fit'):
-        point_dtype([{'name': 'v', 'offset': 4, 'datatype': FLOAT64, 'count': 1}], 8)
-    with pytest.raises(ReportError, match='unknown datatype'):
-        point_dtype([{'name': 'v', 'offset': 0, 'datatype': 9, 'count': 1}], 8)
-
-
-def test_cloud_points_handles_rows_with_padding() -> None:
-    points = state_points([7, 8, 9, 10], np.arange(8.0).reshape(4, 2), [0.1] * 4)
-    message = cloud(0, points, STATE_FIELDS)
-    np.testing.assert_array_equal(cloud_points(message), points)
-    raw = points.tobytes()
-    padded = raw[:64] + b'\xff' * 8 + raw[64:] + b'\xff' * 8  # 2 rows of 2, row_step 72
-    message.update(height=2, width=2, row_step=72, data=padded)
-    np.testing.assert_array_equal(cloud_points(message), points)
-    message.update(data=padded[:100])
-    with pytest.raises(ReportError, match='do not fit'):
-        cloud_points(message)
 
 
 def test_read_run_gives_what_was_written(sample: tuple[SampleRun, Path]) -> None:
