@@ -60,9 +60,9 @@ def starts(count: int, seed: int = 1) -> np.ndarray:
 def run(count: int) -> dict[str, float]:
     """Simulate count pieces; return timing, particle-seconds and exits."""
     from cone_feeder_sim.physics.rotation import RotationProfile
-    from cone_feeder_sim.physics.simulation import Setup, Simulator
+    from cone_feeder_sim.physics.simulation import SimParams, Simulator
     profile = RotationProfile.from_table(TABLE)
-    sim = Simulator(Setup(), profile)
+    sim = Simulator(SimParams(), profile)
     sim.add(starts(count))
     exits: dict[int, tuple[float, float]] = {}
     accepted = rejected = 0
@@ -93,9 +93,9 @@ def accuracy(sample: int) -> dict[str, float]:
     sys.path.insert(0, str(ROOT / 'test'))
     import reference_model as ref
     from cone_feeder_sim.physics.rotation import RotationProfile
-    from cone_feeder_sim.physics.simulation import Setup, Simulator
+    from cone_feeder_sim.physics.simulation import SimParams, Simulator
     pos = starts(4 * sample)
-    sim = Simulator(Setup(), RotationProfile.from_table(TABLE))
+    sim = Simulator(SimParams(), RotationProfile.from_table(TABLE))
     sim.add(pos)
     mine: dict[int, tuple[float, float]] = {}
     k = 0

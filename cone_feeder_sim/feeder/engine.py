@@ -66,7 +66,7 @@ from ..physics.params import (
     SolverParams)
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
-    add_particles, advance, as_points, check_positions, ExitEvents, Failure, Setup, SimState,
+    add_particles, advance, as_points, check_positions, ExitEvents, Failure, SimParams, SimState,
     StepStats, world_from_cone)
 
 __all__ = [
@@ -385,7 +385,7 @@ class FeederEngine:
     def __init__(self, config: EngineConfig) -> None:
         """Start at t = 0 with the cone at rest and the initial pieces placed."""
         self._config = config
-        self._setup = Setup(model=config.model, solver=config.solver)
+        self._sim_params = SimParams(model=config.model, solver=config.solver)
         self._drive = config.drive
         self._feed = config.feed
         self._pending: list[EngineInput] = []
@@ -398,7 +398,7 @@ class FeederEngine:
         """Put the run in its initial condition at time t (keep ids counting)."""
         self._state = replace(self._state, t=t, angle=0.0, y=self._state.y[:0],
                               products=self._state.products[:0], ids=self._state.ids[:0],
-                              h=self._state.h[:0])
+                              step_size=self._state.step_size[:0])
         self._omega = 0.0
         self._pattern_start = t
         self._commanded = False
@@ -408,7 +408,7 @@ class FeederEngine:
         self._rng = np.random.default_rng(self._config.seed)
         for piece in self._config.initial_pieces:
             self._state, _ = add_particles(
-                self._state, self._setup, [piece.position],
+                self._state, self._sim_params, [piece.position],
                 None if piece.velocity is None else [piece.velocity],
                 None if piece.product is None else [piece.product], omega=self._omega)
 
@@ -556,7 +556,7 @@ class FeederEngine:
             self._command = item.omega
             self._command_time = t0
         elif isinstance(item, SpawnRequest):
-            self._state, ids = add_particles(self._state, self._setup, item.positions,
+            self._state, ids = add_particles(self._state, self._sim_params, item.positions,
                                              item.velocities, item.products,
                                              omega=self._omega)
             return ids
@@ -594,7 +594,7 @@ class FeederEngine:
             d = np.full(count, default.d)
         products = [default.with_overrides({'m': float(mi), 'd': float(di)})
                     for mi, di in zip(masses, d)]
-        self._state, ids = add_particles(self._state, self._setup, positions,
+        self._state, ids = add_particles(self._state, self._sim_params, positions,
                                          np.zeros_like(positions), products,
                                          omega=self._omega)
         return ids
@@ -631,7 +631,7 @@ class FeederEngine:
                                 self._drive.max_angular_acceleration)
         # the state's time is t0 already (ticks are contiguous); make it exact
         self._state = replace(self._state, t=t0)
-        step = advance(self._state, self._setup, profile, t1)
+        step = advance(self._state, self._sim_params, profile, t1)
         self._state = step.state
         self._omega = profile.omega(t1)
         self._index = index + 1

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .scenario import Scenario
-from ..physics.simulation import ExitEvents, Failure, Setup, Simulator, StepResult
+from ..physics.simulation import ExitEvents, Failure, SimParams, Simulator, StepResult
 
 
 @dataclass
@@ -61,7 +61,7 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None) -> RunRes
     Particle ids are the 0-based indices of the pieces in the scenario. progress, if given,
     is called after every output interval with the simulated time.
     """
-    sim = Simulator(Setup(model=scenario.model, solver=scenario.solver), scenario.rotation)
+    sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
     for spec in scenario.particles:
         sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
                 [spec.product])

@@ -42,8 +42,7 @@ ACTIVE = 0
 EXITED = 1
 FAILED = 2
 
-# failure reasons (stored in stats[:, STAT_REASON])
-REASON_NONE = 0
+# failure reasons (stored in stats[:, STAT_REASON]; 0: none)
 REASON_STEP_UNDERFLOW = 1
 REASON_TOO_MANY_STEPS = 2
 REASON_NOT_FINITE = 3
@@ -117,8 +116,8 @@ def locate_exit(h, ya, yb, r_exit):
 
 
 @jit
-def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rtol, atol,
-                     h_min, h_max, h_kink, max_steps, stats, work, piv, k, y1, f0):
+def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, h_prop, rtol,
+                     atol, h_min, h_max, h_kink, max_steps, stats, work, piv, k, y1, f0):
     """
     Advance one particle through all segments, or until it exits or fails.
 
@@ -152,10 +151,10 @@ def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rt
             h = remaining if truncated else h_prop
             omega0 = omega_s + domega * (t - t_seg)
             if fresh:
-                rhs(y, pp, gp, omega0, domega, f0)
-                prepare_step(y, omega0, domega, pp, gp, work, k)
+                rhs(y, product, machine, omega0, domega, f0)
+                prepare_step(y, omega0, domega, product, machine, work, k)
                 fresh = False
-            ok = rodas_step(y, f0, h, omega0, domega, pp, gp, work, piv, k, y1)
+            ok = rodas_step(y, f0, h, omega0, domega, product, machine, work, piv, k, y1)
             err = error_norm(k[5], y, y1, rtol, atol) if ok else np.inf
             steps += 1
             if steps > max_steps:
@@ -179,7 +178,7 @@ def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rt
             if y1[0] * y1[0] + y1[1] * y1[1] >= r_exit * r_exit:
                 theta = locate_exit(h, y, y1, r_exit)
                 h_exit = theta * h
-                ok = rodas_step(y, f0, h_exit, omega0, domega, pp, gp, work, piv, k, y1)
+                ok = rodas_step(y, f0, h_exit, omega0, domega, product, machine, work, piv, k, y1)
                 if not ok:
                     stats[STAT_REASON] = REASON_NOT_FINITE
                     return FAILED, t, h_prop
@@ -210,14 +209,14 @@ def advance_particle(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, rt
 
 
 @jit
-def advance_batch(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, status, t_event,
-                  rtol, atol, h_min, h_max, h_kink, max_steps, stats):
+def advance_batch(y, products, machine, seg_t, seg_omega, seg_domega, r_exit, h_prop, status,
+                  t_event, rtol, atol, h_min, h_max, h_kink, max_steps, stats):
     """
     Advance every ACTIVE particle over the interval seg_t[0]..seg_t[-1].
 
-    y (N, 9) cone-axes states, pp (N, PRODUCT_WIDTH) product rows, gp global row, h_prop (N,)
-    proposed step sizes, status (N,) int64, t_event (N,) receives exit or failure times,
-    atol (9,), stats (N, STAT_WIDTH) int64 counters. Arrays are updated in place.
+    y (N, 9) cone-axes states, products (N, PRODUCT_WIDTH) product rows, machine the global
+    row, h_prop (N,) proposed step sizes, status (N,) int64, t_event (N,) receives exit or
+    failure times, atol (9,), stats (N, STAT_WIDTH) int64 counters. Arrays are updated in place.
     """
     n = STATE_SIZE
     work = np.empty((2, n, n))
@@ -228,7 +227,7 @@ def advance_batch(y, pp, gp, seg_t, seg_omega, seg_domega, r_exit, h_prop, statu
     for p in range(y.shape[0]):
         if status[p] != ACTIVE:
             continue
-        st, t_ev, hp = advance_particle(y[p], pp[p], gp, seg_t, seg_omega, seg_domega,
+        st, t_ev, hp = advance_particle(y[p], products[p], machine, seg_t, seg_omega, seg_domega,
                                         r_exit, h_prop[p], rtol, atol, h_min, h_max, h_kink,
                                         max_steps,
                                         stats[p], work, piv, k, y1, f0)

@@ -29,9 +29,10 @@ Two forms of the vector field are provided for one particle:
   an adaptive integrator can take long steps through sticking phases. The transformation
   is exact: world = R(phi) * cone, with phi the cone angle.
 
-Per-particle constants come in a row `pp` (see cone_feeder_sim.params.product_row) and
-machine/model constants in `gp` (see ModelParams.global_row). Every function here is
-compiled with numba (no Python objects), so the integrator can call them per particle.
+Per-piece constants come in a row `product` (see cone_feeder_sim.physics.params.product_row)
+and the constants of the machine and the model in a row `machine` (see
+ModelParams.global_row). Every function here is compiled with numba (no Python objects), so
+the integrator can call them per particle.
 """
 
 import math
@@ -162,52 +163,52 @@ def normal_force(s_perp, v_perp, r_t, r_c, r_d, r_f):
 
 
 @jit
-def friction_target(u0, u1, u2, u_n, v_full, n_fric, r_a_act, e0, e1, e2, pp, gp):
+def friction_target(u0, u1, u2, u_n, v_full, n_fric, r_a_act, e0, e1, e2, product, machine):
     """
     Return (Q_s^c as 3 floats, a/T_F): the filter's target force (N) and rate (1/s).
 
     u (m/s) the relative velocity, u_n = u . e_Fc, v_full = |u| (eq. 14 uses the full
     relative speed); with the tangential option the component along e_Fc is removed first.
     """
-    if gp[G_TANGENTIAL] != 0.0:
+    if machine[G_TANGENTIAL] != 0.0:
         c = u_n / (e0 * e0 + e1 * e1 + e2 * e2)
         u0, u1, u2 = u0 - c * e0, u1 - c * e1, u2 - c * e2
-    (ev0, ev1, ev2), v = friction_direction(u0, u1, u2, gp[G_EPS])
-    mag = static_friction_magnitude(v, n_fric, r_a_act, pp[P_D], pp[P_MU_C], pp[P_V_C],
-                                    pp[P_V_S], pp[P_C_S])
-    rate = filter_gain(v_full, pp[P_QDOT_F]) / pp[P_T_F]
+    (ev0, ev1, ev2), v = friction_direction(u0, u1, u2, machine[G_EPS])
+    mag = static_friction_magnitude(v, n_fric, r_a_act, product[P_D], product[P_MU_C],
+                                    product[P_V_C], product[P_V_S], product[P_C_S])
+    rate = filter_gain(v_full, product[P_QDOT_F]) / product[P_T_F]
     return mag * ev0, mag * ev1, mag * ev2, rate
 
 
 # --- eq. (38): combined dynamics, world frame ----------------------------------------------
 
 @jit
-def rhs_world(y, pp, gp, omega, out):
+def rhs_world(y, product, machine, omega, out):
     """
     Evaluate eq. (38) with (37) in the world frame, as written in the paper.
 
-    y: (9,) [q (m), qdot (m/s), Q_d (N)]; pp: product row; gp: global row; omega (rad/s);
+    y: (9,) [q (m), qdot (m/s), Q_d (N)]; product: product row; machine: global row; omega (rad/s);
     out: (9,) receives [qdot, qddot (m/s^2), dQ_d/dt (N/s)].
     """
-    h = gp[G_H]
-    k = gp[G_K]
-    s_perp, rho = cone_distance(y[0], y[1], y[2], h, k, gp[G_TIP_EPS])
+    h = machine[G_H]
+    k = machine[G_K]
+    s_perp, rho = cone_distance(y[0], y[1], y[2], h, k, machine[G_TIP_EPS])
     e0, e1, e2 = constraint_direction(y[0], y[1], k, rho)
     v_perp = normal_velocity(y[0], y[1], y[3], y[4], y[5], k, rho)
-    r_a_act, _, n_force = normal_force(s_perp, v_perp, pp[P_R_T], pp[P_R_C], pp[P_R_D],
-                                       pp[P_R_F])
-    n_fric = n_force / pp[P_R_F] if gp[G_LITERAL] != 0.0 else n_force
+    r_a_act, _, n_force = normal_force(s_perp, v_perp, product[P_R_T], product[P_R_C],
+                                       product[P_R_D], product[P_R_F])
+    n_fric = n_force / product[P_R_F] if machine[G_LITERAL] != 0.0 else n_force
     u0, u1, u2 = relative_velocity(y[0:3], y[3:6], omega)
     v_full = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
     q0, q1, q2, rate = friction_target(u0, u1, u2, u0 * e0 + u1 * e1 + u2 * e2, v_full,
-                                       n_fric, r_a_act, e0, e1, e2, pp, gp)
-    m = pp[P_M]
+                                       n_fric, r_a_act, e0, e1, e2, product, machine)
+    m = product[P_M]
     out[0] = y[3]
     out[1] = y[4]
     out[2] = y[5]
     out[3] = (y[6] + n_force * e0) / m
     out[4] = (y[7] + n_force * e1) / m
-    out[5] = (y[8] + n_force * e2) / m - gp[G_G]
+    out[5] = (y[8] + n_force * e2) / m - machine[G_G]
     out[6] = rate * (q0 - y[6])
     out[7] = rate * (q1 - y[7])
     out[8] = rate * (q2 - y[8])
@@ -216,34 +217,34 @@ def rhs_world(y, pp, gp, omega, out):
 # --- the same system in the frame turning with the cone, with its Jacobian ---------------
 
 @jit
-def rhs(y, pp, gp, omega, domega, out):
+def rhs(y, product, machine, omega, domega, out):
     """
     Evaluate the vector field in cone axes.
 
     y: (9,) [x (m), w (m/s), P (N)] in cone axes; omega (rad/s), domega (rad/s^2) the cone's
     angular velocity and acceleration; out: (9,) receives dy/dt.
     """
-    h = gp[G_H]
-    k = gp[G_K]
+    h = machine[G_H]
+    k = machine[G_K]
     x0, x1, x2 = y[0], y[1], y[2]
     w0, w1, w2 = y[3], y[4], y[5]
-    s_perp, rho = cone_distance(x0, x1, x2, h, k, gp[G_TIP_EPS])
+    s_perp, rho = cone_distance(x0, x1, x2, h, k, machine[G_TIP_EPS])
     e0, e1, e2 = constraint_direction(x0, x1, k, rho)
     v_perp = normal_velocity(x0, x1, w0, w1, w2, k, rho)
-    r_a_act, _, n_force = normal_force(s_perp, v_perp, pp[P_R_T], pp[P_R_C], pp[P_R_D],
-                                       pp[P_R_F])
-    n_fric = n_force / pp[P_R_F] if gp[G_LITERAL] != 0.0 else n_force
+    r_a_act, _, n_force = normal_force(s_perp, v_perp, product[P_R_T], product[P_R_C],
+                                       product[P_R_D], product[P_R_F])
+    n_fric = n_force / product[P_R_F] if machine[G_LITERAL] != 0.0 else n_force
     v_full = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
     q0, q1, q2, rate = friction_target(w0, w1, w2, v_perp, v_full, n_fric, r_a_act, e0, e1,
-                                       e2, pp, gp)
-    m = pp[P_M]
+                                       e2, product, machine)
+    m = product[P_M]
     om2 = omega * omega
     out[0] = w0
     out[1] = w1
     out[2] = w2
     out[3] = (y[6] + n_force * e0) / m + 2.0 * omega * w1 + om2 * x0 + domega * x1
     out[4] = (y[7] + n_force * e1) / m - 2.0 * omega * w0 + om2 * x1 - domega * x0
-    out[5] = (y[8] + n_force * e2) / m - gp[G_G]
+    out[5] = (y[8] + n_force * e2) / m - machine[G_G]
     out[6] = rate * (q0 - y[6]) + omega * y[7]
     out[7] = rate * (q1 - y[7]) - omega * y[6]
     out[8] = rate * (q2 - y[8])
@@ -274,7 +275,7 @@ def _vec3(a, b, c):
 
 
 @jit
-def jacobian(y, pp, gp, omega, domega, jac):
+def jacobian(y, product, machine, omega, domega, jac):
     """
     Write the exact Jacobian d(rhs)/dy, shape (9, 9), of :func:`rhs` into jac.
 
@@ -282,25 +283,25 @@ def jacobian(y, pp, gp, omega, domega, jac):
     differences for both friction-direction options and both normal-force readings.
     Allocates nothing (small vectors are tuples), so it is cheap inside the step loop.
     """
-    h = gp[G_H]
-    k = gp[G_K]
-    eps = gp[G_EPS]
-    m = pp[P_M]
-    d = pp[P_D]
-    mu_c = pp[P_MU_C]
-    v_c = pp[P_V_C]
-    v_s = pp[P_V_S]
-    c_s = pp[P_C_S]
-    r_t = pp[P_R_T]
-    r_d = pp[P_R_D]
-    r_f = pp[P_R_F]
-    t_f = pp[P_T_F]
-    qf = pp[P_QDOT_F]
+    h = machine[G_H]
+    k = machine[G_K]
+    eps = machine[G_EPS]
+    m = product[P_M]
+    d = product[P_D]
+    mu_c = product[P_MU_C]
+    v_c = product[P_V_C]
+    v_s = product[P_V_S]
+    c_s = product[P_C_S]
+    r_t = product[P_R_T]
+    r_d = product[P_R_D]
+    r_f = product[P_R_F]
+    t_f = product[P_T_F]
+    qf = product[P_QDOT_F]
     x0, x1, x2 = y[0], y[1], y[2]
     w = _vec3(y[3], y[4], y[5])
     p = _vec3(y[6], y[7], y[8])
     # geometry: g = grad s_perp = e_Fc, hess = d g / d x (only the x-y block is non-zero)
-    rho = regularised_radius(x0, x1, gp[G_TIP_EPS])
+    rho = regularised_radius(x0, x1, machine[G_TIP_EPS])
     s_perp = x2 - h + k * rho
     g = _vec3(k * x0 / rho, k * x1 / rho, 1.0)
     rho3 = rho * rho * rho
@@ -312,7 +313,7 @@ def jacobian(y, pp, gp, omega, domega, jac):
     hw = _vec3(h00 * w[0] + h01 * w[1], h01 * w[0] + h11 * w[1], 0.0)  # d v_perp / d x
     hg = _vec3(h00 * g[0] + h01 * g[1], h01 * g[0] + h11 * g[1], 0.0)
     # normal force and its gradients
-    th_a = math.tanh(r_t * (s_perp - pp[P_R_C]))
+    th_a = math.tanh(r_t * (s_perp - product[P_R_C]))
     r_a_act = 0.5 * (1.0 - th_a)
     dra_ds = -0.5 * r_t * (1.0 - th_a * th_a)
     th_c = math.tanh(r_d * v_perp)
@@ -325,10 +326,10 @@ def jacobian(y, pp, gp, omega, domega, jac):
                   f_c * dra_dx[2] + r_a_act * dfc_dv * hw[2])
     cw = r_a_act * dfc_dv
     dn_dw = _vec3(cw * g[0], cw * g[1], cw * g[2])
-    nscale = 1.0 / r_f if gp[G_LITERAL] != 0.0 else 1.0
+    nscale = 1.0 / r_f if machine[G_LITERAL] != 0.0 else 1.0
     n_fric = n_force * nscale
     # friction velocity u and its Jacobians du/dx, du/dw
-    if gp[G_TANGENTIAL] != 0.0:
+    if machine[G_TANGENTIAL] != 0.0:
         gn2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2]
         c = v_perp / gn2
         u = _vec3(w[0] - c * g[0], w[1] - c * g[1], w[2] - c * g[2])

@@ -51,7 +51,7 @@ C51, C52, C53, C54 = (0.7496443313967647e1, -0.1024680431464352e2, -0.3399990352
 C61, C62, C63, C64, C65 = (0.8083246795921522e1, -0.7981132988064893e1,
                            -0.3152159432874371e2, 0.1631930543123136e2,
                            -0.6058818238834054e1)
-ORDER = 4
+#: Order of the embedded error estimate (the method itself is of order 4).
 ERROR_ORDER = 3
 
 
@@ -228,7 +228,7 @@ def solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, kk, r):
 
 
 @jit
-def prepare_step(y0, omega0, domega, pp, gp, work, k):
+def prepare_step(y0, omega0, domega, product, machine, work, k):
     """
     Evaluate what a step from y0 needs, whatever its size.
 
@@ -237,7 +237,7 @@ def prepare_step(y0, omega0, domega, pp, gp, work, k):
 
     A rejected step is retried with the same Jacobian: only W = I/(gamma h) - J changes.
     """
-    jacobian(y0, pp, gp, omega0, domega, work[0])
+    jacobian(y0, product, machine, omega0, domega, work[0])
     ft = k[7]
     rhs_omega_derivative(y0, omega0, ft)
     for i in range(ft.shape[0]):
@@ -245,7 +245,7 @@ def prepare_step(y0, omega0, domega, pp, gp, work, k):
 
 
 @jit
-def rodas_step(y0, f0, h, omega0, domega, pp, gp, work, piv, k, y1):
+def rodas_step(y0, f0, h, omega0, domega, product, machine, work, piv, k, y1):
     """
     Take one RODAS4 step of size h from y0 (f0 = rhs at y0) and write the result into y1.
 
@@ -276,21 +276,21 @@ def rodas_step(y0, f0, h, omega0, domega, pp, gp, work, piv, k, y1):
     # stage 2
     for i in range(n):
         ys[i] = y0[i] + A21 * k[0, i]
-    rhs(ys, pp, gp, omega0 + domega * C2 * h, domega, f)
+    rhs(ys, product, machine, omega0 + domega * C2 * h, domega, f)
     for i in range(n):
         k[1, i] = f[i] + h * D2 * ft[i] + C21 * k[0, i] / h
     solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 1)
     # stage 3
     for i in range(n):
         ys[i] = y0[i] + A31 * k[0, i] + A32 * k[1, i]
-    rhs(ys, pp, gp, omega0 + domega * C3 * h, domega, f)
+    rhs(ys, product, machine, omega0 + domega * C3 * h, domega, f)
     for i in range(n):
         k[2, i] = f[i] + h * D3 * ft[i] + (C31 * k[0, i] + C32 * k[1, i]) / h
     solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 2)
     # stage 4
     for i in range(n):
         ys[i] = y0[i] + A41 * k[0, i] + A42 * k[1, i] + A43 * k[2, i]
-    rhs(ys, pp, gp, omega0 + domega * C4 * h, domega, f)
+    rhs(ys, product, machine, omega0 + domega * C4 * h, domega, f)
     for i in range(n):
         k[3, i] = (f[i] + h * D4 * ft[i]
                    + (C41 * k[0, i] + C42 * k[1, i] + C43 * k[2, i]) / h)
@@ -299,7 +299,7 @@ def rodas_step(y0, f0, h, omega0, domega, pp, gp, work, piv, k, y1):
     for i in range(n):
         ys[i] = y0[i] + A51 * k[0, i] + A52 * k[1, i] + A53 * k[2, i] + A54 * k[3, i]
     omega1 = omega0 + domega * h
-    rhs(ys, pp, gp, omega1, domega, f)
+    rhs(ys, product, machine, omega1, domega, f)
     for i in range(n):
         k[4, i] = f[i] + (C51 * k[0, i] + C52 * k[1, i] + C53 * k[2, i]
                           + C54 * k[3, i]) / h
@@ -307,7 +307,7 @@ def rodas_step(y0, f0, h, omega0, domega, pp, gp, work, piv, k, y1):
     # stage 6 (error estimate)
     for i in range(n):
         ys[i] += k[4, i]
-    rhs(ys, pp, gp, omega1, domega, f)
+    rhs(ys, product, machine, omega1, domega, f)
     for i in range(n):
         k[5, i] = f[i] + (C61 * k[0, i] + C62 * k[1, i] + C63 * k[2, i] + C64 * k[3, i]
                           + C65 * k[4, i]) / h

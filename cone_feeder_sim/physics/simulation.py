@@ -15,7 +15,7 @@
 """
 Simulation state over many particles and the pure function that advances it.
 
-:class:`SimState` holds the changing state as arrays over N particles; :class:`Setup` holds
+:class:`SimState` holds the changing state as arrays over N particles; :class:`SimParams` holds
 the immutable parameters (validated once). :func:`advance` is pure: it returns a new state
 and the events of the interval, and never mutates its inputs. :class:`Simulator` is a small
 mutable convenience wrapper used by the headless runner and the ROS node.
@@ -46,7 +46,7 @@ FAILURE_REASONS = {
 
 
 @dataclass(frozen=True)
-class Setup:
+class SimParams:
     """Immutable parameters of a run, with the kernel arrays derived from them once."""
 
     model: ModelParams = ModelParams()
@@ -56,11 +56,11 @@ class Setup:
 
     def __post_init__(self) -> None:
         """Derive the kernel arrays."""
-        gp = self.model.global_row()
+        machine = self.model.global_row()
         atol = self.solver.atol_row()
-        gp.setflags(write=False)
+        machine.setflags(write=False)
         atol.setflags(write=False)
-        object.__setattr__(self, 'global_row', gp)
+        object.__setattr__(self, 'global_row', machine)
         object.__setattr__(self, 'atol', atol)
 
 
@@ -71,7 +71,7 @@ class SimState:
 
     t (s); angle (rad) the cone angle phi(t); y (N, 9) [x (m), w (m/s), P (N)] in cone axes;
     products (N, PRODUCT_WIDTH) product rows; ids (N,) int64 unique particle ids;
-    h (N,) proposed next step sizes (s); next_id the id the next new particle gets.
+    step_size (N,) proposed next step sizes (s); next_id the id the next new particle gets.
     """
 
     t: float = 0.0
@@ -79,7 +79,7 @@ class SimState:
     y: np.ndarray = field(default_factory=lambda: np.zeros((0, STATE_SIZE)))
     products: np.ndarray = field(default_factory=lambda: np.zeros((0, PRODUCT_WIDTH)))
     ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    h: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    step_size: np.ndarray = field(default_factory=lambda: np.zeros(0))
     next_id: int = 0
 
     @property
@@ -201,7 +201,7 @@ def check_positions(model: ModelParams, positions: np.ndarray) -> None:
                 f'(z = {surface[i]:.4f} m there)')
 
 
-def add_particles(state: SimState, setup: Setup, positions: object,
+def add_particles(state: SimState, params: SimParams, positions: object,
                   velocities: object | None = None,
                   products: Sequence[ProductParams] | None = None,
                   omega: float = 0.0) -> tuple[SimState, np.ndarray]:
@@ -210,12 +210,12 @@ def add_particles(state: SimState, setup: Setup, positions: object,
 
     positions (M, 3) (m) world frame; velocities (M, 3) (m/s) world frame or None for
     pieces lying on the feeder and moving with it (qdot = omega z x q); products: one
-    ProductParams per piece or None for the setup's default product; omega (rad/s) the cone's
-    angular velocity at state.t. The filter force starts at zero.
+    ProductParams per piece or None for the default product of params.model; omega (rad/s)
+    the cone's angular velocity at state.t. The filter force starts at zero.
     """
     q = as_points('position', positions)
     count = q.shape[0]
-    check_positions(setup.model, q)
+    check_positions(params.model, q)
     if velocities is None:
         qdot = np.zeros_like(q)
         qdot[:, 0] = -omega * q[:, 1]
@@ -223,7 +223,7 @@ def add_particles(state: SimState, setup: Setup, positions: object,
     else:
         qdot = as_points('velocity', velocities, count)
     if products is None:
-        rows = np.tile(product_row(setup.model.product), (count, 1))
+        rows = np.tile(product_row(params.model.product), (count, 1))
     else:
         if len(products) != count:
             raise ScenarioError(f'{len(products)} products given for {count} positions')
@@ -235,7 +235,7 @@ def add_particles(state: SimState, setup: Setup, positions: object,
         y=np.vstack([state.y, y_new]),
         products=np.vstack([state.products, rows]),
         ids=np.concatenate([state.ids, ids]),
-        h=np.concatenate([state.h, np.full(count, setup.solver.h_init)]),
+        step_size=np.concatenate([state.step_size, np.full(count, params.solver.h_init)]),
         next_id=state.next_id + count)
     return new, ids
 
@@ -244,10 +244,10 @@ def remove_particles(state: SimState, ids: object) -> SimState:
     """Return a new state without the particles whose ids are given."""
     keep = ~np.isin(state.ids, np.asarray(ids, dtype=np.int64))
     return replace(state, y=state.y[keep], products=state.products[keep],
-                   ids=state.ids[keep], h=state.h[keep])
+                   ids=state.ids[keep], step_size=state.step_size[keep])
 
 
-def advance(state: SimState, setup: Setup, profile: RotationProfile,
+def advance(state: SimState, params: SimParams, profile: RotationProfile,
             t1: float) -> StepResult:
     """
     Advance every particle from state.t to t1 under the rotation profile.
@@ -258,18 +258,18 @@ def advance(state: SimState, setup: Setup, profile: RotationProfile,
     """
     seg_t, seg_omega, seg_domega = profile.segments(state.t, t1)
     y = state.y.copy()
-    h = state.h.copy()
+    step_size = state.step_size.copy()
     n = state.count
     status = np.full(n, ACTIVE, dtype=np.int64)
     t_event = np.zeros(n)
     stats = np.zeros((n, STAT_WIDTH), dtype=np.int64)
-    solver = setup.solver
+    solver = params.solver
     if n:
-        advance_batch(y, state.products, setup.global_row, seg_t, seg_omega, seg_domega,
-                      setup.model.r, h, status, t_event, solver.rtol, setup.atol,
+        advance_batch(y, state.products, params.global_row, seg_t, seg_omega, seg_domega,
+                      params.model.r, step_size, status, t_event, solver.rtol, params.atol,
                       solver.h_min, solver.h_max, solver.h_init, solver.max_steps,
                       stats)
-    exits = _exit_events(state, setup, profile, y, status, t_event)
+    exits = _exit_events(state, params, profile, y, status, t_event)
     failures = tuple(
         Failure(particle_id=int(state.ids[i]), t=float(t_event[i]),
                 reason=FAILURE_REASONS.get(int(stats[i, STAT_REASON]), 'unknown'),
@@ -279,13 +279,13 @@ def advance(state: SimState, setup: Setup, profile: RotationProfile,
     keep = status == ACTIVE
     new_state = replace(state, t=float(t1), angle=state.angle + profile.integral(state.t, t1),
                         y=y[keep], products=state.products[keep], ids=state.ids[keep],
-                        h=h[keep])
+                        step_size=step_size[keep])
     step_stats = StepStats(accepted=int(stats[:, STAT_ACCEPTED].sum()),
                            rejected=int(stats[:, STAT_REJECTED].sum()), particles=n)
     return StepResult(state=new_state, exits=exits, failures=failures, stats=step_stats)
 
 
-def _exit_events(state: SimState, setup: Setup, profile: RotationProfile, y: np.ndarray,
+def _exit_events(state: SimState, params: SimParams, profile: RotationProfile, y: np.ndarray,
                  status: np.ndarray, t_event: np.ndarray) -> ExitEvents:
     idx = np.flatnonzero(status == EXITED)
     positions = np.zeros((idx.size, 3))
@@ -299,21 +299,21 @@ def _exit_events(state: SimState, setup: Setup, profile: RotationProfile, y: np.
     angle_deg = np.mod(np.degrees(np.arctan2(positions[:, 1], positions[:, 0])), 360.0)
     angle_deg = np.where(angle_deg >= 360.0, 0.0, angle_deg)
     return ExitEvents(ids=state.ids[idx].copy(), t=t_event[idx].copy(), angle_deg=angle_deg,
-                      channel=setup.model.channels.channel_of(angle_deg),
+                      channel=params.model.channels.channel_of(angle_deg),
                       position=positions, velocity=velocities,
                       mass=state.products[idx, P_M].copy())
 
 
 class Simulator:
     """
-    Mutable convenience wrapper: a setup, a rotation profile and the current state.
+    Mutable convenience wrapper: a params, a rotation profile and the current state.
 
     Used by the headless runner and the ROS node; all physics goes through :func:`advance`.
     """
 
-    def __init__(self, setup: Setup, profile: RotationProfile, t0: float = 0.0) -> None:
+    def __init__(self, params: SimParams, profile: RotationProfile, t0: float = 0.0) -> None:
         """Start an empty simulation at t0 with the cone angle phi(t0) of the profile."""
-        self.setup = setup
+        self.params = params
         self.profile = profile
         self.state = SimState(t=float(t0), angle=profile.angle(t0))
 
@@ -329,13 +329,13 @@ class Simulator:
     def add(self, positions: object, velocities: object | None = None,
             products: Sequence[ProductParams] | None = None) -> np.ndarray:
         """Add particles now; return their ids. See :func:`add_particles`."""
-        self.state, ids = add_particles(self.state, self.setup, positions, velocities,
+        self.state, ids = add_particles(self.state, self.params, positions, velocities,
                                         products, omega=self.omega())
         return ids
 
     def advance_to(self, t1: float) -> StepResult:
         """Advance to t1 and keep the new state; return the step's result."""
-        result = advance(self.state, self.setup, self.profile, t1)
+        result = advance(self.state, self.params, self.profile, t1)
         self.state = result.state
         return result
 

@@ -31,7 +31,7 @@ from cone_feeder_sim.feeder.runner import run_scenario
 from cone_feeder_sim.formats.parameter_file import read_yaml
 from cone_feeder_sim.formats.scenario_file import load_scenario, scenario_from_mapping
 from cone_feeder_sim.physics.simulation import resting_height
-from cone_feeder_sim.physics.simulation import Setup, Simulator
+from cone_feeder_sim.physics.simulation import SimParams, Simulator
 import numpy as np
 import pytest
 
@@ -183,7 +183,7 @@ def slip_onset(content: dict[str, Any], tol: float = 1.0e-2) -> tuple[float, flo
     run is sampled every 2 ms.
     """
     scenario = scenario_from_mapping(content, base_dir=CONFIG)
-    sim = Simulator(Setup(model=scenario.model, solver=scenario.solver), scenario.rotation)
+    sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
     spec = scenario.particles[0]
     sim.add([spec.position], None, [spec.product])
     k = 0
@@ -220,7 +220,7 @@ def stationary_cone(reading: str, duration: float = 2.0) -> tuple[np.ndarray, np
     content = variant(0.0, duration=duration, model={'friction_direction': reading},
                       solver=TIGHT)
     scenario = scenario_from_mapping(content, base_dir=CONFIG)
-    sim = Simulator(Setup(model=scenario.model, solver=scenario.solver), scenario.rotation)
+    sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
     for spec in scenario.particles:
         sim.add([spec.position], None, [spec.product])
     sim.advance_to(duration)

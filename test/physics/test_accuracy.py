@@ -53,7 +53,7 @@ import math
 from cone_feeder_sim.physics.params import ModelParams, ProductParams, SolverParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import resting_height
-from cone_feeder_sim.physics.simulation import Setup, Simulator
+from cone_feeder_sim.physics.simulation import SimParams, Simulator
 import numpy as np
 import pytest
 
@@ -199,7 +199,7 @@ def _production(case: Case, interval: float | None) -> ProductionRun:
     :return: Exits, failures and the final state of the piece if still on the cone.
     """
     model = ModelParams(**dict(case.options))
-    sim = Simulator(Setup(model=model, solver=SolverParams()),
+    sim = Simulator(SimParams(model=model, solver=SolverParams()),
                     RotationProfile.from_table([list(row) for row in case.table]))
     sim.add(np.array([case.start]), None, products=[ProductParams(d=case.d)])
     exit_t: list[float] = []

@@ -62,9 +62,9 @@ def _batch(y: np.ndarray, seg_t: list[float], omega: float, max_steps: int = 1_0
     t_event = np.zeros(n)
     h = np.full(n, 1e-5)
     stats = np.zeros((n, integrator.STAT_WIDTH), dtype=np.int64)
-    pp = np.tile(PP, (n, 1))
+    products = np.tile(PP, (n, 1))
     seg = np.array(seg_t)
-    integrator.advance_batch(y, pp, GP, seg, np.full(seg.size - 1, omega),
+    integrator.advance_batch(y, products, GP, seg, np.full(seg.size - 1, omega),
                              np.zeros(seg.size - 1), 0.225, h, status, t_event, 1e-5, ATOL,
                              h_min, 0.01, 1e-5, max_steps, stats)
     return status, t_event, stats

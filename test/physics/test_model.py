@@ -161,11 +161,11 @@ def test_rhs_world_at_rest_on_stationary_cone_by_hand() -> None:
 
 
 def _cone_derivative_from_world(yw: np.ndarray, angle: float, omega: float,
-                                domega: float, gp: np.ndarray) -> np.ndarray:
+                                domega: float, machine: np.ndarray) -> np.ndarray:
     """Transform the world-frame derivative into the derivative of the cone-axes state."""
     q, qd, qf = yw[0:3], yw[3:6], yw[6:9]
     dw = np.zeros(9)
-    model.rhs_world(yw, PP, gp, omega, dw)
+    model.rhs_world(yw, PP, machine, omega, dw)
     qdd, qfd = dw[3:6], dw[6:9]
     zx = np.cross([0, 0, 1.0], q)
     w_world = qd - omega * zx
@@ -181,43 +181,43 @@ def _cone_derivative_from_world(yw: np.ndarray, angle: float, omega: float,
 @pytest.mark.parametrize('tangential', [False, True])
 def test_cone_frame_field_equals_transformed_world_field(literal: bool,
                                                          tangential: bool) -> None:
-    gp = ModelParams(normal_force='literal' if literal else 'newton',
-                     friction_direction='tangential' if tangential else 'full').global_row()
+    machine = ModelParams(normal_force='literal' if literal else 'newton',
+                          friction_direction='tangential' if tangential else 'full').global_row()
     rng = np.random.default_rng(7)
     for _ in range(25):
         angle, omega, domega = rng.uniform(-3, 3), rng.uniform(-10, 10), rng.uniform(-30, 30)
         yw = np.concatenate([[rng.uniform(-0.15, 0.15), rng.uniform(-0.15, 0.15),
                               rng.uniform(0.01, 0.05)],
                              rng.normal(0, 0.3, 3), rng.normal(0, 1.0, 3)])
-        expected = _cone_derivative_from_world(yw, angle, omega, domega, gp)
+        expected = _cone_derivative_from_world(yw, angle, omega, domega, machine)
         zx = np.cross([0, 0, 1.0], yw[0:3])
         yc = np.concatenate([rotate_z(yw[0:3], -angle), rotate_z(yw[3:6] - omega * zx, -angle),
                              rotate_z(yw[6:9], -angle)])
         got = np.zeros(9)
-        model.rhs(yc, PP, gp, omega, domega, got)
+        model.rhs(yc, PP, machine, omega, domega, got)
         np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.parametrize('literal', [False, True])
 @pytest.mark.parametrize('tangential', [False, True])
 def test_jacobian_matches_finite_differences(literal: bool, tangential: bool) -> None:
-    gp = ModelParams(normal_force='literal' if literal else 'newton',
-                     friction_direction='tangential' if tangential else 'full').global_row()
+    machine = ModelParams(normal_force='literal' if literal else 'newton',
+                          friction_direction='tangential' if tangential else 'full').global_row()
     rng = np.random.default_rng(3)
     base = np.array([0.1, -0.03, 0.035, 1e-3, 2e-3, -1e-3, 0.3, -0.2, 0.1])
     f_plus, f_minus, jac = np.zeros(9), np.zeros(9), np.zeros((9, 9))
     for _ in range(20):
         y = base * (1.0 + 0.5 * rng.standard_normal(9))
         omega, domega = rng.uniform(-10, 10), rng.uniform(-30, 30)
-        model.jacobian(y, PP, gp, omega, domega, jac)
+        model.jacobian(y, PP, machine, omega, domega, jac)
         numeric = np.zeros((9, 9))
         for j in range(9):
             step = max(1e-5 * abs(y[j]), 1e-9)
             yp, ym = y.copy(), y.copy()
             yp[j] += step
             ym[j] -= step
-            model.rhs(yp, PP, gp, omega, domega, f_plus)
-            model.rhs(ym, PP, gp, omega, domega, f_minus)
+            model.rhs(yp, PP, machine, omega, domega, f_plus)
+            model.rhs(ym, PP, machine, omega, domega, f_minus)
             numeric[:, j] = (f_plus - f_minus) / (2 * step)
         scale = np.abs(numeric).max(axis=1, keepdims=True) + 1e-12
         assert np.max(np.abs(jac - numeric) / scale) < 1e-6

@@ -33,7 +33,7 @@ import math
 
 from cone_feeder_sim.physics.params import ModelParams, ProductParams, SolverParams
 from cone_feeder_sim.physics.rotation import rotate_z, RotationProfile
-from cone_feeder_sim.physics.simulation import ExitEvents, resting_height, Setup, Simulator
+from cone_feeder_sim.physics.simulation import ExitEvents, resting_height, SimParams, Simulator
 import numpy as np
 import pytest
 
@@ -49,7 +49,7 @@ REVERSING = [[0.0, 0.0], [0.4, CW], [1.0, CW], [1.4, CCW]]
 
 def _simulator(table: list[list[float]], model: ModelParams | None = None) -> Simulator:
     """Return a simulator with default solver settings and the given rotation table."""
-    return Simulator(Setup(model=model or ModelParams(), solver=SolverParams()),
+    return Simulator(SimParams(model=model or ModelParams(), solver=SolverParams()),
                      RotationProfile.from_table(table))
 
 
@@ -170,7 +170,7 @@ def test_slow_spin_up_slips_between_static_predictions(d: float) -> None:
     start = np.array([SPIN_UP_RHO, 0.0,
                       resting_height(model, product, SPIN_UP_RHO, 0.0)])
     profile = RotationProfile.from_table([[0.0, 0.0], [SPIN_UP_TIME, -10.0]])
-    sim = Simulator(Setup(model=model, solver=SolverParams()), profile)
+    sim = Simulator(SimParams(model=model, solver=SolverParams()), profile)
     sim.add(start, None, products=[product])
     lower = _slip_omega(product.mu_C * math.cos(TILT), SPIN_UP_RHO)
     upper = _slip_omega(product.mu_S * math.cos(TILT), SPIN_UP_RHO)

@@ -20,7 +20,7 @@ from cone_feeder_sim.errors import ScenarioError
 from cone_feeder_sim.physics.params import ModelParams, ProductParams, SolverParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
-    add_particles, advance, cone_from_world, remove_particles, Setup, SimState, Simulator,
+    add_particles, advance, cone_from_world, remove_particles, SimParams, SimState, Simulator,
     world_from_cone)
 import numpy as np
 import pytest
@@ -44,7 +44,7 @@ def test_world_and_cone_axes_round_trip() -> None:
 
 
 def test_add_assigns_increasing_ids_and_validates() -> None:
-    setup = Setup()
+    setup = SimParams()
     state, ids = add_particles(SimState(), setup, TABLE1[:2])
     assert ids.tolist() == [0, 1] and state.count == 2
     state, ids = add_particles(state, setup, [TABLE1[2]], omega=2.0)
@@ -65,7 +65,7 @@ def test_add_assigns_increasing_ids_and_validates() -> None:
 
 
 def test_advance_is_pure_and_reports_exits() -> None:
-    setup = Setup()
+    setup = SimParams()
     profile = RotationProfile.from_table([[0.0, 0.0], [0.4, -10.47]])
     state, _ = add_particles(SimState(), setup, TABLE1,
                              products=[ProductParams(d=d) for d in TABLE1_D])
@@ -87,13 +87,13 @@ def test_advance_is_pure_and_reports_exits() -> None:
 
 
 def test_a_failing_piece_is_reported_and_removed_while_others_carry_on() -> None:
-    setup = Setup()
+    setup = SimParams()
     profile = RotationProfile.constant(-5.0)
     state, _ = add_particles(SimState(), setup, TABLE1[:3])
     y = state.y.copy()
     y[1, 4] = np.inf
     broken = SimState(t=state.t, angle=state.angle, y=y, products=state.products,
-                      ids=state.ids, h=state.h, next_id=state.next_id)
+                      ids=state.ids, step_size=state.step_size, next_id=state.next_id)
     result = advance(broken, setup, profile, 0.1)
     assert [f.particle_id for f in result.failures] == [1]
     assert 'non-finite' in result.failures[0].reason
@@ -106,7 +106,7 @@ def test_a_failing_piece_is_reported_and_removed_while_others_carry_on() -> None
 def test_results_do_not_depend_on_the_output_interval(friction: str) -> None:
     # regression: without a largest step, a stick-slip transition starting inside a 0.1 s
     # step escaped the error estimate (11 degrees off with tangential friction)
-    setup = Setup(model=ModelParams(friction_direction=friction))
+    setup = SimParams(model=ModelParams(friction_direction=friction))
     profile = RotationProfile.from_table([[0.0, 0.0], [0.5, -8.37758], [3.0, -8.37758],
                                           [4.0, 10.47198]])
     exits = []
@@ -126,7 +126,7 @@ def test_results_do_not_depend_on_the_output_interval(friction: str) -> None:
 
 
 def test_simulator_wrapper() -> None:
-    sim = Simulator(Setup(solver=SolverParams(rtol=1e-6)), RotationProfile.constant(2.0), 0.5)
+    sim = Simulator(SimParams(solver=SolverParams(rtol=1e-6)), RotationProfile.constant(2.0), 0.5)
     assert sim.t == 0.5 and sim.state.angle == pytest.approx(1.0)
     ids = sim.add([(0.05, 0.0, 0.0525)])
     q, qd, _ = sim.world()
