@@ -13,10 +13,11 @@
 # limitations under the License.
 
 """
-The command line: `cone-feeder-sim run` (headless runs) and `cone-feeder-sim report`.
+The command line: `cone-feeder-sim run`, `report` and `recover`.
 
 `cone-feeder-sim run SCENARIO.yaml --events EVENTS.csv` runs a scenario;
-`cone-feeder-sim report RUN.mcap --out REPORT.png` draws the report of a recorded run.
+`cone-feeder-sim report RUN.mcap --out REPORT.png` draws the report of a recorded run;
+`cone-feeder-sim recover IN.mcap OUT.mcap` makes a complete file of an unfinished one.
 
 Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors.
 """
@@ -34,6 +35,7 @@ from .errors import ConeFeederError
 from .feeder.runner import run_scenario
 from .feeder.scenario import Scenario
 from .formats.events_csv import write_events_csv
+from .formats.mcap_reader import recover_mcap
 from .formats.runlog import ScenarioRecorder
 from .formats.scenario_file import load_scenario
 from .physics.simulation import Simulator, StepResult
@@ -107,6 +109,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help='draw at most N trajectories (default 60)')
     report.add_argument('--dpi', type=float, default=100.0,
                         help='resolution; the page is 17 x 9.6 inches (default 100)')
+    recover = sub.add_parser(
+        'recover', help='copy the readable part of an unfinished or damaged MCAP file into a '
+                        'complete one (with summary and footer)')
+    recover.add_argument('mcap', metavar='IN.mcap', help='MCAP file to recover')
+    recover.add_argument('out', metavar='OUT.mcap', help='complete MCAP file to write')
     return parser
 
 
@@ -163,6 +170,16 @@ def cmd_report(args: argparse.Namespace, err: TextIO) -> int:
     return 0
 
 
+def cmd_recover(args: argparse.Namespace, err: TextIO) -> int:
+    """Recover the readable part of an MCAP file; return the exit code."""
+    if Path(args.out).resolve() == Path(args.mcap).resolve():
+        raise ConeFeederError(f'recovering {args.mcap} into itself would destroy it')
+    check_writable(args.out, 'the recovered file')
+    count = recover_mcap(args.mcap, args.out)
+    err.write(f'recovered {count} messages from {args.mcap} into {args.out}\n')
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `cone-feeder-sim`."""
     parser = build_parser()
@@ -172,6 +189,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return cmd_run(args, sys.stderr)
         if args.command == 'report':
             return cmd_report(args, sys.stderr)
+        if args.command == 'recover':
+            return cmd_recover(args, sys.stderr)
     except ConeFeederError as exc:
         sys.stderr.write(f'error: {exc}\n')
         return 2

@@ -14,6 +14,7 @@
 
 """Tests of the command line and of the runner and the events CSV it writes."""
 
+import contextlib
 import csv
 import io
 from pathlib import Path
@@ -21,7 +22,9 @@ from pathlib import Path
 from cone_feeder_sim.cli import main, ProgressBar
 from cone_feeder_sim.feeder.runner import run_scenario
 from cone_feeder_sim.formats.events_csv import EVENT_COLUMNS
+from cone_feeder_sim.formats.mcap_writer import McapRecorder
 from cone_feeder_sim.formats.scenario_file import scenario_from_mapping
+import mcap.reader
 import numpy as np
 import pytest
 
@@ -103,3 +106,26 @@ def test_progress_bar_on_a_pipe_prints_every_tenth() -> None:
         bar(k / 100.0, Sim(), Step())  # type: ignore[arg-type]
     lines = stream.getvalue().splitlines()
     assert len(lines) == 11 and lines[-1].startswith('[' + '#' * 30 + ']')
+
+
+def test_recover_makes_a_complete_file_of_an_unfinished_one(tmp_path: Path) -> None:
+    source = tmp_path / 'run.mcap'
+    with McapRecorder(source, chunk_size=200) as recorder:
+        for i in range(500):
+            recorder.write('/n', 'std_msgs/msg/Float64', {'data': float(i)}, i * 1000)
+    raw = source.read_bytes()
+    source.write_bytes(raw[:len(raw) // 2])  # cut off, as after a SIGKILL
+    out = tmp_path / 'recovered.mcap'
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert main(['recover', str(source), str(out)]) == 0
+    count = int(err.getvalue().split()[1])
+    assert 0 < count < 500
+    with out.open('rb') as stream:
+        reader = mcap.reader.make_reader(stream)
+        assert reader.get_summary().statistics.message_count == count
+        assert [m.log_time for _, _, m in reader.iter_messages()] == [
+            i * 1000 for i in range(count)]
+    with contextlib.redirect_stderr(io.StringIO()):
+        assert main(['recover', str(out), str(out)]) == 2
+        assert main(['recover', str(tmp_path / 'missing.mcap'), str(out)]) == 2

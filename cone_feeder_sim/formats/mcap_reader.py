@@ -34,14 +34,23 @@ from pathlib import Path
 import struct
 from typing import Any, BinaryIO
 
-from mcap.reader import SeekingReader
-from mcap.records import Channel, Footer, McapRecord, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+try:  # zstandard is optional for mcap; only needed to recognise its errors here.
+    import zstandard
+except ImportError:  # pragma: no cover - zstandard is installed with mcap's zstd support
+    zstandard = None
 
-from .mcap_writer import _READ_ERRORS
+from mcap.reader import SeekingReader
+from mcap.exceptions import McapError
+from mcap.records import (
+    Attachment, Channel, Footer, Header, McapRecord, Message, Metadata, Schema)
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from .mcap_writer import _open_for_writing, LIBRARY
 from ..errors import RecordingError
 
 __all__ = [
+    'recover_mcap',
     'RecordedMessage',
     'RecordedTopic',
     'Recording',
@@ -70,6 +79,12 @@ class RecordedMessage:
     data: bytes
 
 
+#: What reading a truncated or corrupt record can raise (EndOfFile is an McapError).
+_READ_ERRORS: tuple[type[BaseException], ...] = (
+    McapError, EOFError, ValueError, RuntimeError, struct.error, KeyError, IndexError) + (
+    (zstandard.ZstdError,) if zstandard is not None else ())
+
+
 def _open(path: Path) -> BinaryIO:
     try:
         return open(path, 'rb')
@@ -89,12 +104,16 @@ class RecordStream:
     Iterating reads from the stream's current position (the magic bytes first) with CRCs
     checked, and stops at the end of the file or at the first record that is incomplete or
     damaged: :attr:`error` is then what reading it raised (None while none was raised).
-    The stream's position is where reading stopped.
+    The stream's position is where reading stopped. :attr:`schemas` and :attr:`channels`
+    hold the schema and channel records seen so far (the first of each id), so that
+    :meth:`channel_of` resolves a message as soon as it is yielded.
     """
 
     def __init__(self, stream: BinaryIO) -> None:
         """Read ``stream`` (open in binary mode) when iterated."""
         self.error: BaseException | None = None
+        self.schemas: dict[int, Schema] = {}
+        self.channels: dict[int, Channel] = {}
         self._records = StreamReader(stream, validate_crcs=True).records
 
     def __iter__(self) -> Iterator[McapRecord]:
@@ -107,7 +126,18 @@ class RecordStream:
             except _READ_ERRORS as err:
                 self.error = err
                 return
+            if isinstance(record, Schema):
+                self.schemas.setdefault(record.id, record)
+            elif isinstance(record, Channel):
+                self.channels.setdefault(record.id, record)
             yield record
+
+    def channel_of(self, message: Message) -> tuple[Channel, Schema | None] | None:
+        """Return the channel of a message and its schema; None for an unknown channel."""
+        channel = self.channels.get(message.channel_id)
+        if channel is None:
+            return None
+        return channel, self.schemas.get(channel.schema_id)
 
 
 @dataclass
@@ -264,7 +294,6 @@ def _first_damaged_chunk(stream: BinaryIO, indexes: list[Any]) -> tuple[Any, str
 
 def _scan(path: Path) -> Recording:
     """Read an incomplete file sequentially up to its first unreadable record."""
-    schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, str]] = {}
     qos: dict[str, str] = {}
     counts: dict[str, int] = {}
@@ -276,10 +305,9 @@ def _scan(path: Path) -> Recording:
     with _open(path) as stream:
         records = RecordStream(stream)
         for record in records:
-            if isinstance(record, Schema):
-                schemas[record.id] = record.name
-            elif isinstance(record, Channel):
-                channels[record.id] = (record.topic, schemas.get(record.schema_id, ''))
+            if isinstance(record, Channel) and record.id not in channels:
+                channels[record.id] = (record.topic,
+                                       _type_name(records.schemas.get(record.schema_id)))
                 qos.setdefault(record.topic, record.metadata.get('offered_qos_profiles', ''))
                 counts.setdefault(record.topic, 0)
             elif isinstance(record, Metadata):
@@ -322,3 +350,58 @@ def open_recording(path: str | os.PathLike) -> Recording:
         raise RecordingError(f'{str(path)!r} is not an MCAP file (wrong magic bytes)')
     recording = _read_complete(path)
     return recording if recording is not None else _scan(path)
+
+
+def recover_mcap(source: str | os.PathLike, destination: str | os.PathLike) -> int:
+    """
+    Copy the readable part of a possibly truncated MCAP file into a complete one.
+
+    Records are read in order until the first one that is incomplete or corrupt (a chunk
+    only counts once it decompresses and its CRC matches); schemas, channels, messages,
+    metadata and attachments read before that are written to ``destination`` with summary
+    and footer. Return the number of messages recovered.
+    """
+    source_path = Path(source)
+    with _open(source_path) as source_stream:
+        records = RecordStream(source_stream)
+        header = next(iter(records), None)
+        if not isinstance(header, Header):
+            reason = repr(records.error) if records.error is not None else 'no MCAP header'
+            raise RecordingError(f'{str(source_path)!r} is not an MCAP file: {reason}')
+        with _open_for_writing(Path(destination)) as stream:
+            writer = Writer(stream, compression=CompressionType.ZSTD)
+            writer.start(profile=header.profile, library=f'{LIBRARY} (recovered)')
+            count = _copy_records(records, writer)
+            writer.finish()
+    return count
+
+
+def _copy_records(records: RecordStream, writer: Writer) -> int:
+    """Copy records to ``writer`` until the stream ends or a record is unreadable."""
+    schema_ids: dict[int, int] = {0: 0}
+    channel_ids: dict[int, int] = {}
+    count = 0
+    for record in records:
+        if isinstance(record, Schema):
+            if record.id not in schema_ids:
+                schema_ids[record.id] = writer.register_schema(
+                    record.name, record.encoding, record.data)
+        elif isinstance(record, Channel):
+            if record.id not in channel_ids and record.schema_id in schema_ids:
+                channel_ids[record.id] = writer.register_channel(
+                    record.topic, record.message_encoding, schema_ids[record.schema_id],
+                    dict(record.metadata))
+        elif isinstance(record, Message):
+            channel_id = channel_ids.get(record.channel_id)
+            if channel_id is not None:
+                writer.add_message(
+                    channel_id, record.log_time, record.data, record.publish_time,
+                    record.sequence)
+                count += 1
+        elif isinstance(record, Metadata):
+            writer.add_metadata(record.name, dict(record.metadata))
+        elif isinstance(record, Attachment):
+            writer.add_attachment(
+                record.create_time, record.log_time, record.name, record.media_type,
+                record.data)
+    return count

@@ -29,22 +29,20 @@ public since mcap 1.2) and pushed to the OS at least every
 ``chunk_size`` bytes (the recorder decides when chunks end, not the Writer, so
 that every finished chunk also reaches the OS). After a SIGKILL the file is
 therefore a valid MCAP prefix that streaming readers read up to the last
-complete chunk; :func:`recover_mcap` turns such a file into a complete one
-(with summary and footer) that indexed readers such as rosbags accept.
+complete chunk; ``cone-feeder-sim recover`` (:func:`~cone_feeder_sim.formats.mcap_reader.
+recover_mcap`) turns such a file into a complete one (with summary and footer) that indexed
+readers such as rosbags accept.
 """
 
 import collections.abc
 import os
 import pathlib
-import struct
 import threading
 import time
 from types import TracebackType
 from typing import Any, BinaryIO, Self
 
 from mcap.exceptions import McapError
-from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from .cdr import CdrCodec, CdrError, default_codec
@@ -52,16 +50,11 @@ from .msgtypes import MessageDefinitionError, normalize_type_name
 from .topics import QosLike, QosProfile
 from ..errors import RecordingError
 
-try:  # zstandard is optional for mcap; only needed to recognise its errors here.
-    import zstandard
-except ImportError:  # pragma: no cover - zstandard is installed with mcap's zstd support
-    zstandard = None
 
 __all__ = [
     'COMPRESSIONS',
     'DEFAULT_FLUSH_INTERVAL_S',
     'McapRecorder',
-    'recover_mcap',
 ]
 
 DEFAULT_FLUSH_INTERVAL_S = 1.0
@@ -301,83 +294,3 @@ class McapRecorder:
     ) -> None:
         """Close the recorder, completing the file even when an exception is propagating."""
         self.close()
-
-
-def _open_for_reading(path: pathlib.Path) -> BinaryIO:
-    try:
-        return open(path, 'rb')
-    except OSError as err:
-        reason = err.strerror or str(err)
-        raise RecordingError(f'cannot open MCAP file {str(path)!r} for reading: {reason}') from err
-
-
-#: What reading a truncated or corrupt record can raise (EndOfFile is an McapError).
-_READ_ERRORS: tuple[type[BaseException], ...] = (
-    McapError, EOFError, ValueError, RuntimeError, struct.error, KeyError, IndexError) + (
-    (zstandard.ZstdError,) if zstandard is not None else ())
-
-
-def recover_mcap(
-    source: str | os.PathLike, destination: str | os.PathLike
-) -> int:
-    """
-    Copy the readable part of a possibly truncated MCAP file into a complete one.
-
-    Records are read in order until the first one that is incomplete or
-    corrupt (a chunk only counts once it decompresses and its CRC matches);
-    schemas, channels, messages, metadata and attachments read before that are
-    written to ``destination`` with summary and footer. Return the number of
-    messages recovered.
-    """
-    source_path, destination_path = pathlib.Path(source), pathlib.Path(destination)
-    with _open_for_reading(source_path) as source_stream:
-        records = StreamReader(source_stream, validate_crcs=True).records
-        try:
-            header = next(records)
-        except (StopIteration, *_READ_ERRORS) as err:
-            raise RecordingError(f'{str(source_path)!r} is not an MCAP file: {err!r}') from err
-        if not isinstance(header, Header):
-            raise RecordingError(f'{str(source_path)!r} does not start with an MCAP header')
-        with _open_for_writing(destination_path) as stream:
-            writer = Writer(stream, compression=CompressionType.ZSTD)
-            writer.start(profile=header.profile, library=f'{LIBRARY} (recovered)')
-            count = _copy_records(records, writer)
-            writer.finish()
-    return count
-
-
-def _copy_records(records: collections.abc.Iterator[Any], writer: Writer) -> int:
-    """Copy records to ``writer`` until the stream ends or a record is unreadable."""
-    schema_ids: dict[int, int] = {0: 0}
-    channel_ids: dict[int, int] = {}
-    count = 0
-    while True:
-        try:
-            record = next(records)
-        except StopIteration:
-            break
-        except _READ_ERRORS:
-            break  # truncated or corrupt record: everything before it is kept
-        if isinstance(record, Schema):
-            if record.id not in schema_ids:
-                schema_ids[record.id] = writer.register_schema(
-                    record.name, record.encoding, record.data)
-        elif isinstance(record, Channel):
-            if record.id not in channel_ids and record.schema_id in schema_ids:
-                channel_ids[record.id] = writer.register_channel(
-                    record.topic, record.message_encoding, schema_ids[record.schema_id],
-                    dict(record.metadata))
-        elif isinstance(record, Message):
-            channel_id = channel_ids.get(record.channel_id)
-            if channel_id is not None:
-                writer.add_message(
-                    channel_id, record.log_time, record.data, record.publish_time,
-                    record.sequence)
-                count += 1
-        elif isinstance(record, Metadata):
-            writer.add_metadata(record.name, dict(record.metadata))
-        elif isinstance(record, Attachment):
-            writer.add_attachment(
-                record.create_time, record.log_time, record.name, record.media_type,
-                record.data)
-    return count

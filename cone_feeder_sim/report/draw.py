@@ -71,7 +71,7 @@ def draw_top_view(ax: Any, run: RunData) -> None:
     handles = []
     trajectories = run.trajectories.by_id()
     exits = run.exits
-    exit_at = {int(i): (float(x), float(y)) for i, x, y in zip(exits.ids, exits.x, exits.y)
+    exit_at = {int(i): (float(x), float(y)) for i, (x, y) in zip(exits.ids, exits.position[:, :2])
                if i >= 0 and int(i) in trajectories}
     if trajectories:
         segments = []
@@ -104,7 +104,8 @@ def draw_top_view(ax: Any, run: RunData) -> None:
                                   label='first position'))
     if len(exits):
         many = len(exits) > _MANY_EXITS
-        ax.scatter(exits.x, exits.y, s=10 if many else 28, marker='o' if many else 'x',
+        ax.scatter(exits.position[:, 0], exits.position[:, 1], s=10 if many else 28,
+                   marker='o' if many else 'x',
                    color='tab:red', alpha=0.3 if many else 1.0, linewidth=0.0 if many else 1.2,
                    zorder=6)
         handles.append(ax.plot([], [], linestyle='none', marker='o' if many else 'x',
@@ -189,9 +190,9 @@ def draw_pieces(ax: Any, run: RunData) -> None:
                                color='tab:green', linewidth=1.2, label='pieces on the cone')[0])
     if len(run.exits):
         span = run.time_span()
-        end = span[1] if span is not None else float(run.exits.t[-1])
-        start = span[0] if span is not None else float(run.exits.t[0])
-        t = np.concatenate(([start], run.exits.t, [end]))
+        end = span[1] if span is not None else float(run.exit_log_time[-1])
+        start = span[0] if span is not None else float(run.exit_log_time[0])
+        t = np.concatenate(([start], run.exit_log_time, [end]))
         n = np.concatenate(([0], np.arange(1, len(run.exits) + 1), [len(run.exits)]))
         handles.append(ax.step(t, n, where='post', color='tab:red', linewidth=1.2,
                                label='exits so far')[0])

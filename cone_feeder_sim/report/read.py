@@ -54,12 +54,12 @@ from ..formats.pointcloud import cloud_points
 from ..formats.runlog import METADATA_NAME
 from ..formats.topics import TOPICS
 from ..physics.params import ChannelLayout, model_params_from_mapping, ModelParams
+from ..physics.simulation import ExitEvents
 
 __all__ = [
     'DEFAULT_MAX_TRAJECTORIES',
     'DEFAULT_MAX_TRAJECTORY_POINTS',
     'ChannelTotals',
-    'ExitEvents',
     'ReportError',
     'RunData',
     'TimeSeries',
@@ -137,30 +137,6 @@ class Trajectories:
 
 
 @dataclasses.dataclass(frozen=True)
-class ExitEvents:
-    """
-    Every exit read from ``exit_events``, one row per piece, sorted by log time.
-
-    ``t`` (s) log time of the message; ``exit_time`` (s) the point's ``exit_time``
-    (the log time when absent); ``ids`` (int64, -1 when absent); ``x``, ``y``
-    (m); ``mass`` (kg); ``channel`` (1-based; from the angle and the layout when
-    the field is absent).
-    """
-
-    t: np.ndarray
-    exit_time: np.ndarray
-    ids: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    mass: np.ndarray
-    channel: np.ndarray
-
-    def __len__(self) -> int:
-        """Return the number of exits."""
-        return int(self.t.shape[0])
-
-
-@dataclasses.dataclass(frozen=True)
 class ChannelTotals:
     """Exits per channel: ``count`` (int64) and ``mass`` (kg), index 0 = channel 1."""
 
@@ -190,6 +166,7 @@ class RunData:
     metadata: dict[str, str]
     trajectories: Trajectories
     exits: ExitEvents
+    exit_log_time: np.ndarray
     omega: TimeSeries
     pieces: TimeSeries
     channel_mass: np.ndarray | None
@@ -207,7 +184,7 @@ class RunData:
         """Return the first and last log time (s) of the data shown, or None without data."""
         times = [series.t for series in (self.omega, self.pieces) if len(series)]
         if len(self.exits):
-            times.append(self.exits.t)
+            times.append(self.exit_log_time)
         if not times:
             return None
         return (min(float(t[0]) for t in times), max(float(t[-1]) for t in times))
@@ -376,7 +353,6 @@ class _RunReader:
                  max_trajectory_points: int) -> None:
         """Prepare empty accumulators; see :func:`read_run` for the arguments."""
         self.namespace = namespace
-        self.schemas: dict[int, Schema] = {}
         self.codecs: dict[int, CdrCodec] = {}
         self.channels: dict[int, tuple[str, str, CdrCodec]] = {}
         self.topics: dict[str, str] = {}
@@ -393,25 +369,22 @@ class _RunReader:
         self.message_count = 0
         self.failures: dict[str, tuple[int, str]] = {}
 
-    def take(self, record: Any) -> None:
-        """Take one record of the stream."""
+    def take(self, record: Any, stream: RecordStream) -> None:
+        """Take one record of ``stream`` (which knows the schemas read so far)."""
         if isinstance(record, Message):
             self.message_count += 1
             channel = self.channels.get(record.channel_id)
             if channel is not None:
                 self._message(channel, record)
-        elif isinstance(record, Schema):
-            self.schemas.setdefault(record.id, record)
         elif isinstance(record, Channel):
-            self._channel(record)
+            self._channel(record, stream.schemas.get(record.schema_id))
         elif isinstance(record, Metadata) and record.name == METADATA_NAME:
             self.metadata = {**(self.metadata or {}), **dict(record.metadata)}
 
-    def _channel(self, record: Channel) -> None:
+    def _channel(self, record: Channel, schema: Schema | None) -> None:
         if record.id in self.channels:
             return
         role = _topic_role(record.topic, self.namespace)
-        schema = self.schemas.get(record.schema_id)
         if role is None or schema is None or record.message_encoding != 'cdr':
             return
         try:
@@ -468,8 +441,14 @@ class _RunReader:
         self.omega_t.append(t)
         self.omega.append(float(velocity[index]))
 
-    def exits(self, layout: ChannelLayout) -> ExitEvents:
-        """Return the exits read, with channels from the layout where the field is absent."""
+    def exits(self, layout: ChannelLayout) -> tuple[ExitEvents, np.ndarray]:
+        """
+        Return the exits read, sorted by log time, and their log times (s).
+
+        Fields a recording lacks are filled in: ``exit_time`` with the log time, ``id``
+        with -1, ``z`` and velocities with NaN, ``mass`` with 0 and ``channel`` from the
+        angle and the layout.
+        """
         def column(name: str, dtype: type, default: Any = None) -> np.ndarray:
             parts = []
             for t, points in self.exit_parts:
@@ -481,21 +460,25 @@ class _RunReader:
                     parts.append(np.full(points.shape[0], default, dtype=dtype))
             return np.concatenate(parts) if parts else np.zeros(0, dtype=dtype)
 
-        t = np.concatenate([np.full(p.shape[0], t) for t, p in self.exit_parts]) if (
+        log_time = np.concatenate([np.full(p.shape[0], t) for t, p in self.exit_parts]) if (
             self.exit_parts) else np.zeros(0)
-        x, y = column('x', np.float64, 0.0), column('y', np.float64, 0.0)
+        position = np.column_stack([column('x', np.float64, 0.0), column('y', np.float64, 0.0),
+                                    column('z', np.float64, np.nan)])
+        velocity = np.column_stack([column(name, np.float64, np.nan)
+                                    for name in ('vx', 'vy', 'vz')])
+        angle_deg = np.degrees(np.arctan2(position[:, 1], position[:, 0])) % 360.0
         channel = column('channel', np.int64, 0)
         has_channel = np.concatenate([
             np.full(p.shape[0], 'channel' in (p.dtype.names or ())) for _, p in self.exit_parts
         ]) if self.exit_parts else np.zeros(0, dtype=bool)
         if not has_channel.all():
-            computed = layout.channel_of(np.degrees(np.arctan2(y, x)))
-            channel = np.where(has_channel, channel, computed)
-        order = np.argsort(t, kind='stable')
-        return ExitEvents(
-            t=t[order], exit_time=column('exit_time', np.float64)[order],
-            ids=column('id', np.int64, -1)[order], x=x[order], y=y[order],
-            mass=column('mass', np.float64, 0.0)[order], channel=channel[order])
+            channel = np.where(has_channel, channel, layout.channel_of(angle_deg))
+        order = np.argsort(log_time, kind='stable')
+        exits = ExitEvents(
+            ids=column('id', np.int64, -1)[order], t=column('exit_time', np.float64)[order],
+            angle_deg=angle_deg[order], channel=channel[order], position=position[order],
+            velocity=velocity[order], mass=column('mass', np.float64, 0.0)[order])
+        return exits, log_time[order]
 
 
 def _series(t: list[float], value: list[Any], dtype: type) -> TimeSeries:
@@ -547,7 +530,7 @@ def read_run(
         if not isinstance(header, Header):
             raise ReportError(f'{str(path)!r} is not an MCAP file (no header record)')
         for record in records:
-            reader.take(record)
+            reader.take(record, readable)
     truncated = None if readable.error is None else _describe_error(readable.error)
     return _finish(path, reader, truncated)
 
@@ -565,6 +548,7 @@ def _finish(path: pathlib.Path, reader: _RunReader, truncated: str | None) -> Ru
         if role not in reader.topics:
             notes.append(f'no {role} topic ({TOPIC_TYPES[role]}) in the file')
     trajectories = reader.trajectories.result()
+    exits, exit_log_time = reader.exits(layout)
     if trajectories.message_stride > 1 or trajectories.id_stride > 1:
         stride = trajectories.message_stride
         notes.append(
@@ -575,7 +559,7 @@ def _finish(path: pathlib.Path, reader: _RunReader, truncated: str | None) -> Ru
     return RunData(
         path=path, layout=layout, cone_radius=radius, layout_from_metadata=from_metadata,
         metadata=dict(reader.metadata or {}), trajectories=trajectories,
-        exits=reader.exits(layout),
+        exits=exits, exit_log_time=exit_log_time,
         omega=_series(reader.omega_t, reader.omega, np.float64),
         pieces=_series(reader.pieces_t, reader.pieces_n, np.int64),
         channel_mass=reader.channel_mass, channel_mass_time=reader.channel_mass_time,

@@ -35,7 +35,8 @@ from typing import Any
 from cone_feeder_sim.errors import ConeFeederError
 from cone_feeder_sim.errors import RecordingError
 from cone_feeder_sim.formats.cdr import decode, default_message
-from cone_feeder_sim.formats.mcap_writer import McapRecorder, recover_mcap
+from cone_feeder_sim.formats.mcap_reader import recover_mcap
+from cone_feeder_sim.formats.mcap_writer import McapRecorder
 from cone_feeder_sim.formats.msgtypes import default_registry
 from cone_feeder_sim.formats.topics import QosProfile
 import mcap.exceptions

@@ -34,9 +34,10 @@ from cone_feeder_sim.errors import ConeFeederError
 from cone_feeder_sim.errors import ReportError
 from cone_feeder_sim.formats.mcap_writer import McapRecorder
 from cone_feeder_sim.physics.params import ChannelLayout, ModelParams
+from cone_feeder_sim.physics.simulation import ExitEvents
 from cone_feeder_sim.report.draw import build_figure, write_report
 from cone_feeder_sim.report.read import (
-    check_channel_mass, ExitEvents, exits_per_channel, layout_from_metadata, read_run)
+    check_channel_mass, exits_per_channel, layout_from_metadata, read_run)
 import numpy as np
 import pytest
 
@@ -236,11 +237,12 @@ def test_read_run_gives_what_was_written(sample: tuple[SampleRun, Path]) -> None
     assert sorted(exits.ids.tolist()) == [0, 1, 2, 3]
     for i, (tick, angle) in run.leave.items():
         row = int(np.flatnonzero(exits.ids == i)[0])
-        assert exits.t[row] == pytest.approx(run.times_ns[tick] * 1e-9)
-        assert exits.exit_time[row] == pytest.approx(run.times_ns[tick] * 1e-9 - 0.005)
+        assert data.exit_log_time[row] == pytest.approx(run.times_ns[tick] * 1e-9)
+        assert exits.t[row] == pytest.approx(run.times_ns[tick] * 1e-9 - 0.005)
+        assert exits.angle_deg[row] == pytest.approx(math.degrees(angle) % 360.0)
         assert exits.mass[row] == run.masses[i]
         assert exits.channel[row] == LAYOUT.channel_of(math.degrees(angle))
-        assert math.hypot(exits.x[row], exits.y[row]) == pytest.approx(RADIUS)
+        assert math.hypot(*exits.position[row, :2]) == pytest.approx(RADIUS)
     count, mass = run.channel_totals()
     totals = data.exit_totals()
     np.testing.assert_array_equal(totals.count, count)
@@ -334,9 +336,9 @@ def test_defaults_without_metadata(tmp_path: Path) -> None:
 
 
 def test_exits_per_channel_counts_and_masses() -> None:
-    exits = ExitEvents(t=np.arange(5.0), exit_time=np.arange(5.0), ids=np.arange(5),
-                       x=np.zeros(5), y=np.zeros(5), mass=np.array([0.1, 0.2, 0.3, 0.4, 0.5]),
-                       channel=np.array([2, 2, 0, 5, 1]))
+    exits = ExitEvents(ids=np.arange(5), t=np.arange(5.0), angle_deg=np.zeros(5),
+                       channel=np.array([2, 2, 0, 5, 1]), position=np.zeros((5, 3)),
+                       velocity=np.zeros((5, 3)), mass=np.array([0.1, 0.2, 0.3, 0.4, 0.5]))
     totals = exits_per_channel(exits, 3)
     np.testing.assert_array_equal(totals.count, [1, 2, 0, 0, 1])  # channel 0 is not counted
     np.testing.assert_allclose(totals.mass, [0.5, 0.3, 0.0, 0.0, 0.4])

@@ -32,7 +32,7 @@ import sys
 from typing import Any
 
 from cone_feeder_sim.formats.mcap_reader import open_recording
-from cone_feeder_sim.formats.mcap_writer import recover_mcap
+from cone_feeder_sim.formats.mcap_reader import recover_mcap
 from cone_feeder_sim.formats.runlog import END_METADATA_NAME, METADATA_NAME
 import mcap.exceptions
 import mcap.reader
