@@ -15,8 +15,9 @@
 """
 The live simulation without ROS: a cone drive, a product feed and inputs applied per tick.
 
-:class:`FeederEngine` advances the physics core (:func:`~cone_feeder_sim.simulation.advance`)
-by a fixed simulated step ``dt`` on every :meth:`FeederEngine.tick`. It owns
+:class:`FeederEngine` advances the physics core
+(:func:`~cone_feeder_sim.physics.simulation.advance`) by a fixed simulated step ``dt`` on
+every :meth:`FeederEngine.tick`. It owns
 
 * the **cone drive**: the cone's angular velocity follows a target within
   ``max_angular_acceleration`` (rad/s^2); the target is clamped to
@@ -26,7 +27,7 @@ by a fixed simulated step ``dt`` on every :meth:`FeederEngine.tick`. It owns
   ``cmd_timeout`` seconds of simulation time have passed without a command (0 = hold the
   last command for ever). The target is sampled at the start of each tick; within the tick
   omega ramps linearly at the acceleration limit and is held once the target is reached,
-  so the tick's :class:`~cone_feeder_sim.rotation.RotationProfile` has a kink inside the
+  so the tick's :class:`~cone_feeder_sim.physics.rotation.RotationProfile` has a kink inside the
   tick when the target is reached mid-tick.
 * the **product feed**: pieces arrive as a Poisson process of ``rate`` pieces/s (the count
   per tick is Poisson(rate * dt)), at positions uniform over the annulus
@@ -84,7 +85,7 @@ __all__ = [
     'pattern_from_flat',
 ]
 
-#: Allowed ranges of the engine's own settings (the model's are in cone_feeder_sim.params).
+#: Allowed ranges of the engine's own settings (the model's are in cone_feeder_sim.physics.params).
 ENGINE_LIMITS: dict[str, Limit] = {
     'dt': Limit(0.0, 1.0, 's', lo_open=True),
     'max_angular_velocity': Limit(0.0, 100.0, 'rad/s', lo_open=True),

@@ -16,7 +16,7 @@
 Running a scenario headless: the loop over output intervals, with progress callbacks.
 
 The loop is shared by the command line and the tests. It advances a
-:class:`~cone_feeder_sim.simulation.Simulator` interval by interval (output_interval of the
+:class:`~cone_feeder_sim.physics.simulation.Simulator` interval by interval (output_interval of the
 scenario), collects the exit events and failures, and reports progress.
 """
 

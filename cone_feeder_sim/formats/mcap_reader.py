@@ -34,13 +34,8 @@ from pathlib import Path
 import struct
 from typing import Any, BinaryIO
 
-try:  # zstandard is optional for mcap; only needed to recognise its errors here.
-    import zstandard
-except ImportError:  # pragma: no cover - zstandard is installed with mcap's zstd support
-    zstandard = None
-
-from mcap.reader import SeekingReader
 from mcap.exceptions import McapError
+from mcap.reader import SeekingReader
 from mcap.records import (
     Attachment, Channel, Footer, Header, McapRecord, Message, Metadata, Schema)
 from mcap.stream_reader import StreamReader
@@ -49,13 +44,18 @@ from mcap.writer import CompressionType, Writer
 from .mcap_writer import _open_for_writing, LIBRARY
 from ..errors import RecordingError
 
+try:  # zstandard is optional for mcap; only needed to recognise its errors here.
+    import zstandard
+except ImportError:  # pragma: no cover - zstandard is installed with mcap's zstd support
+    zstandard = None
+
 __all__ = [
-    'recover_mcap',
     'RecordedMessage',
     'RecordedTopic',
     'Recording',
     'RecordStream',
     'open_recording',
+    'recover_mcap',
 ]
 
 

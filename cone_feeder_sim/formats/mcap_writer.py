@@ -17,9 +17,9 @@ Crash-tolerant ROS 2 MCAP recording without rclpy.
 
 :class:`McapRecorder` writes the ``ros2`` MCAP profile the way rosbag2 does:
 schemas with encoding ``ros2msg`` holding the complete definition text (see
-:mod:`cone_feeder_sim.msgdefs`), channels with message encoding ``cdr`` and
+:mod:`cone_feeder_sim.formats.msgtypes`), channels with message encoding ``cdr`` and
 the ``offered_qos_profiles`` metadata (YAML), and messages encoded with
-:mod:`cone_feeder_sim.cdr`. Log and publish times are the caller's
+:mod:`cone_feeder_sim.formats.cdr`. Log and publish times are the caller's
 nanoseconds.
 
 Data are written in chunks that are finished (``mcap.writer.Writer.flush``,

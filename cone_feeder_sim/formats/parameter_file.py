@@ -16,7 +16,7 @@
 Reading configuration files: the parameter file and the solver settings.
 
 All file I/O of configuration lives here; validation is done by the parameter classes in
-cone_feeder_sim.params, which this module feeds with plain mappings.
+cone_feeder_sim.physics.params, which this module feeds with plain mappings.
 """
 
 from collections.abc import Mapping

@@ -16,7 +16,7 @@
 Run logs: what a recording of the simulator holds besides the messages, and its writers.
 
 A run log is one MCAP file in the ROS 2 layout written by
-:class:`~cone_feeder_sim.recording.McapRecorder` (schemas ``ros2msg``, messages ``cdr``,
+:class:`~cone_feeder_sim.formats.mcap_writer.McapRecorder` (schemas ``ros2msg``, messages ``cdr``,
 ``offered_qos_profiles``, log time = simulation time in ns). This module adds
 
 * the metadata record :data:`METADATA_NAME` (``cone_feeder_sim``): every parameter as a

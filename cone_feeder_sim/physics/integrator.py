@@ -18,7 +18,8 @@ Adaptive integration of every particle over one interval, with exit location.
 The pieces are independent in the paper's model, so each particle is advanced with its own
 step size by :func:`advance_particle`; :func:`advance_batch` loops over the particles. The
 step control (error norm, step-size proposal) is separate from the method
-(:mod:`cone_feeder_sim.rosenbrock`) and from the vector field (:mod:`cone_feeder_sim.model`).
+(:mod:`cone_feeder_sim.physics.rosenbrock`) and from the vector field
+(:mod:`cone_feeder_sim.physics.model`).
 
 The rotation input over the interval is a list of segments of constant angular
 acceleration: seg_t (K+1,) breakpoints (s), seg_omega (K,) angular velocity at the start of

@@ -24,7 +24,7 @@ Coefficients are those of Hairer and Wanner, "Solving Ordinary Differential Equa
     y1 = y0 + sum_{j<=4} a_5j k_j + k_5 + k_6,  error estimate k_6.
 
 This module knows nothing about the physics: it takes a step of a 9-dimensional system
-whose vector field it calls through :func:`cone_feeder_sim.model.rhs`. test_rosenbrock
+whose vector field it calls through :func:`cone_feeder_sim.physics.model.rhs`. test_rosenbrock
 checks the order of convergence on problems with exact solutions.
 """
 

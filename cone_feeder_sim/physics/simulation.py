@@ -21,7 +21,7 @@ and the events of the interval, and never mutates its inputs. :class:`Simulator`
 mutable convenience wrapper used by the headless runner and the ROS node.
 
 Positions and velocities at this interface are in the world frame (z up, origin at the
-centre of the cone base); the integrator works in cone axes (see cone_feeder_sim.model).
+centre of the cone base); the integrator works in cone axes (see cone_feeder_sim.physics.model).
 """
 
 from collections.abc import Sequence

@@ -16,7 +16,7 @@
 The ROS 2 node ``replay_node``: republishes a recorded run with its recorded timing.
 
 Run it with ``ros2 run cone_feeder_sim replay_node --ros-args -p path:=run.mcap -p rate:=1.0
--p loop:=false`` (or ``replay_node`` / ``python -m cone_feeder_sim.replay_node`` in a
+-p loop:=false`` (or ``replay_node`` / ``python -m cone_feeder_sim.ros.replay_node`` in a
 virtual environment with the ``ros-jazzy-*`` wheels).
 
 The recorded topics are published under their recorded (absolute) names with the recorded
@@ -53,11 +53,11 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMessage
 
+from .guarded_node import GuardedNode
 from .parameters import declare, ParamSpec
 from .qos import rclpy_qos
 from ..errors import ConeFeederError, ParameterError
@@ -93,17 +93,12 @@ def _ns_time(ns: int) -> Time:
     return Time(sec=sec, nanosec=nanosec)
 
 
-class ReplayNode(Node):
+class ReplayNode(GuardedNode):
     """Republish a recording with its timing; see the module documentation."""
 
     def __init__(self, **kwargs: Any) -> None:
         """Read the parameters, open the recording and create the publishers."""
-        super().__init__(kwargs.pop('node_name', NODE_NAME), **kwargs)
-        try:
-            self._setup()
-        except BaseException:
-            self.destroy_node()
-            raise
+        super().__init__(NODE_NAME, **kwargs)
 
     def _declare(self, name: str, default: Any, description: str,
                  limit: Limit | None = None) -> Any:

@@ -16,11 +16,11 @@
 The ROS 2 node ``sim_node``: a thin adapter that runs a FeederEngine on a timer.
 
 Run it with ``ros2 run cone_feeder_sim sim_node --ros-args --params-file
-config/sim_node.yaml`` (or ``sim_node`` / ``python -m cone_feeder_sim.sim_node`` in a
+config/sim_node.yaml`` (or ``sim_node`` / ``python -m cone_feeder_sim.ros.sim_node`` in a
 virtual environment with the ``ros-jazzy-*`` wheels). All physics, the drive and the feed
-live in :class:`~cone_feeder_sim.engine.FeederEngine`; this module turns ROS input into
+live in :class:`~cone_feeder_sim.feeder.engine.FeederEngine`; this module turns ROS input into
 engine input and engine output into messages. Messages are built from numpy arrays,
-encoded by :mod:`cone_feeder_sim.cdr` and published as serialized bytes; every published
+encoded by :mod:`cone_feeder_sim.formats.cdr` and published as serialized bytes; every published
 and received message passes through :meth:`SimNode.add_message_hook` callbacks with its
 exact bytes (for MCAP recording).
 
@@ -111,7 +111,6 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock as ClockMessage
 from sensor_msgs.msg import JointState, PointCloud2
@@ -119,6 +118,7 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
+from .guarded_node import GuardedNode
 from .parameters import (
     declare, drive_from_values, engine_config_from_values, feed_from_values, LIVE_PARAMETERS,
     parameter_specs, ParamSpec, RUN_PARAMETERS)
@@ -186,17 +186,12 @@ class _Window:
         self.rejected = 0
 
 
-class SimNode(Node):
+class SimNode(GuardedNode):
     """The cone feeder simulator as a ROS 2 node; see the module documentation."""
 
     def __init__(self, **kwargs: Any) -> None:
         """Declare the parameters, build the engine and create every ROS handle."""
-        super().__init__(kwargs.pop('node_name', NODE_NAME), **kwargs)
-        try:
-            self._setup()
-        except BaseException:
-            self.destroy_node()
-            raise
+        super().__init__(NODE_NAME, **kwargs)
 
     def _setup(self) -> None:
         self._codec = default_codec()

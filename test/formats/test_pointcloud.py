@@ -24,16 +24,8 @@ from cone_feeder_sim.errors import MessageError
 from cone_feeder_sim.formats.pointcloud import (
     cloud_points, EXIT_DTYPE, point_dtype, point_fields, STATE_DTYPE)
 import numpy as np
+from point_layouts import EXIT_FIELDS, FLOAT64, STATE_FIELDS
 import pytest
-
-UINT32, FLOAT32, FLOAT64 = 6, 7, 8
-STATE_FIELDS = [
-    ('x', 0, FLOAT32), ('y', 4, FLOAT32), ('z', 8, FLOAT32), ('vx', 12, FLOAT32),
-    ('vy', 16, FLOAT32), ('vz', 20, FLOAT32), ('id', 24, UINT32), ('mass', 28, FLOAT32)]
-EXIT_FIELDS = [
-    ('x', 0, FLOAT64), ('y', 8, FLOAT64), ('z', 16, FLOAT64), ('vx', 24, FLOAT64),
-    ('vy', 32, FLOAT64), ('vz', 40, FLOAT64), ('exit_time', 48, FLOAT64),
-    ('angle', 56, FLOAT64), ('mass', 64, FLOAT64), ('id', 72, UINT32), ('channel', 76, UINT32)]
 
 
 def field_dicts(fields: list[tuple[str, int, int]]) -> list[dict]:

@@ -39,16 +39,9 @@ from cone_feeder_sim.report.draw import build_figure, write_report
 from cone_feeder_sim.report.read import (
     check_channel_mass, exits_per_channel, layout_from_metadata, read_run)
 import numpy as np
+from point_layouts import EXIT_FIELDS, STATE_FIELDS
 import pytest
 
-UINT32, FLOAT32, FLOAT64 = 6, 7, 8
-STATE_FIELDS = [
-    ('x', 0, FLOAT32), ('y', 4, FLOAT32), ('z', 8, FLOAT32), ('vx', 12, FLOAT32),
-    ('vy', 16, FLOAT32), ('vz', 20, FLOAT32), ('id', 24, UINT32), ('mass', 28, FLOAT32)]
-EXIT_FIELDS = [
-    ('x', 0, FLOAT64), ('y', 8, FLOAT64), ('z', 16, FLOAT64), ('vx', 24, FLOAT64),
-    ('vy', 32, FLOAT64), ('vz', 40, FLOAT64), ('exit_time', 48, FLOAT64),
-    ('angle', 56, FLOAT64), ('mass', 64, FLOAT64), ('id', 72, UINT32), ('channel', 76, UINT32)]
 STATE_DTYPE = np.dtype({
     'names': [f[0] for f in STATE_FIELDS], 'formats': ['<f4'] * 6 + ['<u4', '<f4'],
     'offsets': [f[1] for f in STATE_FIELDS], 'itemsize': 32})
