@@ -1,0 +1,80 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The rooms of the package import one way (doc/architecture.md).
+
+physics <- feeder <- formats <- ros, report <- cli: a module imports only from its own room
+and the rooms before it; physics imports no rclpy, mcap or yaml; nothing below ros imports
+rclpy or ROS message packages.
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / 'cone_feeder_sim'
+#: Rank of each room; ros and report are side by side.
+RANK = {'errors': 0, '__init__': 0, 'physics': 1, 'feeder': 2, 'formats': 3, 'ros': 4,
+        'report': 4, 'cli': 5}
+ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs', 'geometry_msgs',
+                'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'rosgraph_msgs',
+                'builtin_interfaces'}  # ament_index_python: an optional look-up of files
+MODULES = sorted(PACKAGE.rglob('*.py'))
+
+
+def room(parts: tuple[str, ...]) -> str:
+    """Return the room of a module given by its parts below the package."""
+    return parts[0].removesuffix('.py')
+
+
+def imports(path: Path) -> list[tuple[str, str | None]]:
+    """Return (top-level package, room within cone_feeder_sim or None) of every import."""
+    parts = path.relative_to(PACKAGE).parts
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found += [(alias.name.split('.')[0], None) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level == 0:
+                top = (node.module or '').split('.')[0]
+                inner = (node.module or '').split('.')[1:2]
+                found.append((top, inner[0] if top == 'cone_feeder_sim' and inner else None))
+                continue
+            base = list(parts[:-1])[:len(parts) - node.level]
+            target = base + (node.module.split('.') if node.module else [])
+            if not target:  # 'from .. import x' at the top: x is a module or a name
+                name = node.names[0].name
+                target = [name if name in RANK else '__init__']
+            found.append(('cone_feeder_sim', target[0]))
+    return found
+
+
+@pytest.mark.parametrize('path', MODULES, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_imports_run_one_way(path: Path) -> None:
+    source = room(path.relative_to(PACKAGE).parts)
+    for top, target in imports(path):
+        if top == 'cone_feeder_sim' and target is not None:
+            target = target.removesuffix('.py')
+            assert RANK[target] <= RANK[source], f'{source} imports {target}'
+            assert {source, target} != {'ros', 'report'}, f'{source} imports {target}'
+        if RANK[source] < RANK['ros']:
+            assert top not in ROS_PACKAGES, f'{source} imports {top}'
+        if source == 'physics':
+            assert top not in {'mcap', 'yaml', 'rosbags', 'matplotlib'}, top
+
+
+def test_every_module_is_in_a_room() -> None:
+    assert {room(p.relative_to(PACKAGE).parts) for p in MODULES} <= set(RANK)
