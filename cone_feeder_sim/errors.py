@@ -27,6 +27,10 @@ class ScenarioError(ConeFeederError, ValueError):
     """A scenario file or a particle specification is malformed."""
 
 
+class InputError(ConeFeederError, ValueError):
+    """An input to the running simulation (a command, a spawn) is refused."""
+
+
 class RecordingError(ConeFeederError):
     """A recording cannot be opened, written, read or recovered."""
 

@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError, ScenarioError
+from ..errors import InputError, ParameterError, ScenarioError
 from ..physics.params import (
     check_integer, check_number, Limit, ModelParams, P_M, PRODUCT_LIMITS, ProductParams,
     SolverParams)
@@ -77,6 +77,7 @@ __all__ = [
     'FeedParams',
     'FeederEngine',
     'PieceSpec',
+    'Refusal',
     'Reconfigure',
     'ResetRequest',
     'RotationCommand',
@@ -99,6 +100,7 @@ ENGINE_LIMITS: dict[str, Limit] = {
     'feed_mass_rel_std': Limit(0.0, 1.0, ''),
     'max_pieces': Limit(1, 10 ** 6, ''),
     'seed': Limit(0, 2 ** 63 - 1, ''),
+    'spawn_max_height': Limit(0.0, 100.0, 'm', lo_open=True),
 }
 
 #: Segment boundaries of the open-loop pattern closer than this (s) count as reached.
@@ -106,6 +108,8 @@ PATTERN_TOLERANCE = 1.0e-9
 
 #: Largest number of pieces one spawn request may hold.
 MAX_SPAWN = 100_000
+#: Largest number of inputs waiting for the next tick; more are refused.
+MAX_PENDING_INPUTS = 1000
 
 
 def pattern_from_flat(values: Sequence[float]) -> tuple[tuple[float, float], ...]:
@@ -246,6 +250,7 @@ class EngineConfig:
     feed: FeedParams = FeedParams()
     initial_pieces: tuple[PieceSpec, ...] = ()
     seed: int = 0
+    spawn_max_height: float = 1.0
 
     def __post_init__(self) -> None:
         """Validate dt, the seed, the feed annulus and the initial pieces."""
@@ -253,10 +258,16 @@ class EngineConfig:
         object.__setattr__(self, 'seed', check_integer('seed', self.seed,
                                                        ENGINE_LIMITS['seed']))
         check_feed_fits(self.model, self.feed)
+        object.__setattr__(self, 'spawn_max_height', check_number(
+            'spawn.max_height', self.spawn_max_height, ENGINE_LIMITS['spawn_max_height']))
         object.__setattr__(self, 'initial_pieces', tuple(self.initial_pieces))
+        if len(self.initial_pieces) > self.feed.max_pieces:
+            raise ScenarioError(f'{len(self.initial_pieces)} initial pieces exceed '
+                                f'feed.max_pieces = {self.feed.max_pieces}')
         for i, piece in enumerate(self.initial_pieces):
             try:
-                check_positions(self.model, as_points('position', piece.position, 1))
+                check_positions(self.model, as_points('position', piece.position, 1),
+                                self.spawn_max_height)
                 if piece.velocity is not None:
                     as_points('velocity', piece.velocity, 1)
             except ScenarioError as exc:
@@ -308,6 +319,15 @@ class Reconfigure:
 EngineInput = RotationCommand | SpawnRequest | ResetRequest | Reconfigure
 
 
+@dataclass(frozen=True)
+class Refusal:
+    """Input the engine refused while applying it: kind of input, how many pieces, why."""
+
+    kind: str
+    count: int
+    reason: str
+
+
 @dataclass(frozen=True, eq=False)
 class TickResult:
     """
@@ -320,7 +340,11 @@ class TickResult:
     on the cone at t, world frame; exits and failures during the tick; stats of the solver;
     channel_mass (channel_count,) cumulative kg per channel (index 0 = channel 1) at t;
     applied: the inputs applied at t0, in order; spawned_ids: ids added at t0 (requests and
-    feed); feed_ids: the subset added by the feed; reset: whether a reset was applied.
+    feed); feed_ids: the subset added by the feed; reset: whether a reset was applied;
+    refusals: pieces of applied spawns refused (the cone held feed.max_pieces); mass_in,
+    failed_mass (kg): cumulative mass placed on the cone and removed by failed integration
+    since the start or the last reset, so that mass_in = masses.sum() +
+    channel_mass.sum() + failed_mass to round-off.
     """
 
     index: int
@@ -342,6 +366,9 @@ class TickResult:
     spawned_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     feed_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     reset: bool = False
+    refusals: tuple[Refusal, ...] = ()
+    mass_in: float = 0.0
+    failed_mass: float = 0.0
 
     @property
     def count(self) -> int:
@@ -390,6 +417,7 @@ class FeederEngine:
         self._drive = config.drive
         self._feed = config.feed
         self._pending: list[EngineInput] = []
+        self._refusals: list[Refusal] = []
         self._index = 0
         self._state = SimState()
         self._channel_mass = np.zeros(config.model.channels.count)
@@ -406,12 +434,14 @@ class FeederEngine:
         self._command = 0.0
         self._command_time = t
         self._channel_mass[:] = 0.0
+        self._failed_mass = 0.0
         self._rng = np.random.default_rng(self._config.seed)
         for piece in self._config.initial_pieces:
             self._state, _ = add_particles(
                 self._state, self._sim_params, [piece.position],
                 None if piece.velocity is None else [piece.velocity],
                 None if piece.product is None else [piece.product], omega=self._omega)
+        self._mass_in = float(self._state.products[:, P_M].sum())
 
     # ------------------------------------------------------------------ properties
 
@@ -503,6 +533,9 @@ class FeederEngine:
                 check_feed_fits(self._config.model, item.feed)
         elif not isinstance(item, ResetRequest):
             raise ParameterError(f'unknown engine input {item!r}')
+        if len(self._pending) >= MAX_PENDING_INPUTS:
+            raise InputError(f'{type(item).__name__} refused: {MAX_PENDING_INPUTS} inputs are '
+                             'already waiting for the next tick')
         self._pending.append(item)
 
     def _checked_spawn(self, item: SpawnRequest) -> SpawnRequest:
@@ -513,7 +546,7 @@ class FeederEngine:
         if count > MAX_SPAWN:
             raise ScenarioError(f'a spawn request may hold at most {MAX_SPAWN} pieces, got '
                                 f'{count}')
-        check_positions(self._config.model, positions)
+        check_positions(self._config.model, positions, self._config.spawn_max_height)
         velocities = (None if item.velocities is None
                       else as_points('spawn velocity', item.velocities, count))
         products = None
@@ -557,9 +590,13 @@ class FeederEngine:
             self._command = item.omega
             self._command_time = t0
         elif isinstance(item, SpawnRequest):
+            item = self._bounded(item)
+            if item is None:
+                return np.zeros(0, dtype=np.int64)
             self._state, ids = add_particles(self._state, self._sim_params, item.positions,
                                              item.velocities, item.products,
                                              omega=self._omega)
+            self._mass_in += float(self._state.products[-ids.shape[0]:, P_M].sum())
             return ids
         elif isinstance(item, ResetRequest):
             self._start(t0)
@@ -567,6 +604,21 @@ class FeederEngine:
             self._drive = item.drive if item.drive is not None else self._drive
             self._feed = item.feed if item.feed is not None else self._feed
         return np.zeros(0, dtype=np.int64)
+
+    def _bounded(self, item: SpawnRequest) -> SpawnRequest | None:
+        """Return the part of a spawn that fits under feed.max_pieces; refuse the rest."""
+        count = item.positions.shape[0]
+        room = max(0, self._feed.max_pieces - self._state.count)
+        if count <= room:
+            return item
+        self._refusals.append(Refusal(
+            'spawn', count - room, f'{count - room} of {count} pieces refused: the cone holds '
+            f'{self._state.count} pieces, feed.max_pieces = {self._feed.max_pieces}'))
+        if room == 0:
+            return None
+        return SpawnRequest(item.positions[:room],
+                            None if item.velocities is None else item.velocities[:room],
+                            None if item.products is None else item.products[:room])
 
     def _feed_pieces(self) -> np.ndarray:
         """Drop this tick's feed pieces; return their ids."""
@@ -598,6 +650,7 @@ class FeederEngine:
         self._state, ids = add_particles(self._state, self._sim_params, positions,
                                          np.zeros_like(positions), products,
                                          omega=self._omega)
+        self._mass_in += float(masses.sum())
         return ids
 
     def _target(self, t0: float) -> tuple[float, str]:
@@ -620,6 +673,7 @@ class FeederEngine:
         t1 = (index + 1) * dt
         applied = tuple(self._pending)
         self._pending.clear()
+        self._refusals = []
         spawned = []
         was_reset = False
         for item in applied:
@@ -639,6 +693,7 @@ class FeederEngine:
         exits = step.exits
         if len(exits):
             np.add.at(self._channel_mass, exits.channel - 1, exits.mass)
+        self._failed_mass += sum(failure.mass for failure in step.failures)
         q, qdot, _ = world_from_cone(self._state.y, self._state.angle, self._omega)
         return TickResult(
             index=index, t0=t0, t=t1, angle=self._state.angle, omega=self._omega,
@@ -646,4 +701,5 @@ class FeederEngine:
             velocities=qdot, masses=self._state.products[:, P_M].copy(), exits=exits,
             failures=step.failures, stats=step.stats, channel_mass=self._channel_mass.copy(),
             applied=applied, spawned_ids=np.concatenate(spawned), feed_ids=feed_ids,
-            reset=was_reset)
+            reset=was_reset, refusals=tuple(self._refusals), mass_in=self._mass_in,
+            failed_mass=self._failed_mass)

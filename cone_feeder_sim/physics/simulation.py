@@ -113,12 +113,19 @@ class ExitEvents:
 
 @dataclass(frozen=True)
 class Failure:
-    """A particle whose integration failed and which was removed."""
+    """
+    A piece whose integration failed and which was removed.
+
+    t (s) the time of the failure; reason: one of FAILURE_REASONS; position (m) and velocity (m/s) in the world frame at t (NaN where the state
+    was no longer finite); mass (kg).
+    """
 
     particle_id: int
     t: float
     reason: str
     position: tuple[float, float, float]
+    velocity: tuple[float, float, float]
+    mass: float
 
 
 @dataclass(frozen=True)
@@ -186,19 +193,45 @@ def as_points(name: str, values: object, count: int | None = None) -> np.ndarray
     return arr
 
 
-def check_positions(model: ModelParams, positions: np.ndarray) -> None:
-    """Refuse positions outside the cone (rho >= r) or with the centre below its surface."""
-    rho = np.hypot(positions[:, 0], positions[:, 1])
-    surface = model.h * (1.0 - rho / model.r)
-    for i in range(positions.shape[0]):
-        if rho[i] >= model.r:
-            raise ScenarioError(
-                f'position[{i}] {positions[i].tolist()} is outside the cone: radius '
-                f'{rho[i]:.4f} m >= r = {model.r:.4f} m')
-        if positions[i, 2] < surface[i]:
-            raise ScenarioError(
-                f'position[{i}] {positions[i].tolist()} is below the cone surface '
-                f'(z = {surface[i]:.4f} m there)')
+def position_problems(model: ModelParams, positions: np.ndarray,
+                      max_height: float = math.inf) -> tuple[np.ndarray, list[str]]:
+    """
+    Check start positions (M, 3) (m), vectorised; return the mask of valid ones and why not.
+
+    A position is refused when it is not finite, outside the cone (rho >= r), with the
+    centre below the cone surface, or above ``max_height`` (m). The reasons name the index
+    of each refused position, in order.
+    """
+    with np.errstate(invalid='ignore'):
+        finite = np.all(np.isfinite(positions), axis=1)
+        rho = np.hypot(positions[:, 0], positions[:, 1])
+        surface = model.h * (1.0 - rho / model.r)
+        outside = finite & (rho >= model.r)
+        below = finite & ~outside & (positions[:, 2] < surface)
+        above = finite & ~outside & ~below & (positions[:, 2] > max_height)
+    valid = finite & ~outside & ~below & ~above
+    reasons = []
+    for i in np.flatnonzero(~valid):
+        where = f'position[{i}] {positions[i].tolist()}'
+        if not finite[i]:
+            reasons.append(f'{where} is not finite')
+        elif outside[i]:
+            reasons.append(f'{where} is outside the cone: radius {rho[i]:.4f} m >= r = '
+                           f'{model.r:.4f} m')
+        elif below[i]:
+            reasons.append(f'{where} is below the cone surface (z = {surface[i]:.4f} m '
+                           'there)')
+        else:
+            reasons.append(f'{where} is above the highest start {max_height:g} m')
+    return valid, reasons
+
+
+def check_positions(model: ModelParams, positions: np.ndarray,
+                    max_height: float = math.inf) -> None:
+    """Refuse positions outside the cone, below its surface or above max_height (m)."""
+    valid, reasons = position_problems(model, positions, max_height)
+    if reasons:
+        raise ScenarioError(reasons[0])
 
 
 def add_particles(state: SimState, params: SimParams, positions: object,
@@ -270,12 +303,9 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
                       solver.h_min, solver.h_max, solver.h_init, solver.max_steps,
                       stats)
     exits = _exit_events(state, params, profile, y, status, t_event)
-    failures = tuple(
-        Failure(particle_id=int(state.ids[i]), t=float(t_event[i]),
-                reason=FAILURE_REASONS.get(int(stats[i, STAT_REASON]), 'unknown'),
-                position=tuple(float(v) for v in rotate_z(
-                    y[i, 0:3], state.angle + profile.integral(state.t, t_event[i]))))
-        for i in np.flatnonzero(status == FAILED))
+    failures = tuple(_failure(state, profile, y, i, float(t_event[i]),
+                              FAILURE_REASONS.get(int(stats[i, STAT_REASON]), 'unknown'))
+                     for i in np.flatnonzero(status == FAILED))
     keep = status == ACTIVE
     new_state = replace(state, t=float(t1), angle=state.angle + profile.integral(state.t, t1),
                         y=y[keep], products=state.products[keep], ids=state.ids[keep],
@@ -283,6 +313,18 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     step_stats = StepStats(accepted=int(stats[:, STAT_ACCEPTED].sum()),
                            rejected=int(stats[:, STAT_REJECTED].sum()), particles=n)
     return StepResult(state=new_state, exits=exits, failures=failures, stats=step_stats)
+
+
+def _failure(state: SimState, profile: RotationProfile, y: np.ndarray, i: int, t: float,
+             reason: str) -> Failure:
+    """Return the failure of piece i at time t, in the world frame."""
+    angle = state.angle + profile.integral(state.t, t)
+    with np.errstate(invalid='ignore', over='ignore'):
+        q, qdot, _ = world_from_cone(y[i:i + 1], angle, profile.omega(t))
+    return Failure(particle_id=int(state.ids[i]), t=t, reason=reason,
+                   position=tuple(float(v) for v in q[0]),
+                   velocity=tuple(float(v) for v in qdot[0]),
+                   mass=float(state.products[i, P_M]))
 
 
 def _exit_events(state: SimState, params: SimParams, profile: RotationProfile, y: np.ndarray,

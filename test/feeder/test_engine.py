@@ -16,11 +16,11 @@
 
 import math
 
-from cone_feeder_sim.errors import ParameterError, ScenarioError
+from cone_feeder_sim.errors import InputError, ParameterError, ScenarioError
 from cone_feeder_sim.feeder.engine import (
-    drive_profile, DriveParams, EngineConfig, FeederEngine, FeedParams, pattern_from_flat,
-    PieceSpec, Reconfigure, ResetRequest, RotationCommand, SpawnRequest)
-from cone_feeder_sim.physics.params import ModelParams
+    drive_profile, DriveParams, EngineConfig, FeederEngine, FeedParams, MAX_PENDING_INPUTS,
+    pattern_from_flat, PieceSpec, Reconfigure, ResetRequest, RotationCommand, SpawnRequest)
+from cone_feeder_sim.physics.params import ModelParams, SolverParams
 from cone_feeder_sim.physics.simulation import resting_height
 import numpy as np
 import pytest
@@ -394,3 +394,83 @@ def test_world_states_match_the_cone_surface_at_rest() -> None:
                                atol=2e-4)
     np.testing.assert_allclose(res.velocities, 0.0, atol=1e-3)
     assert math.isclose(res.masses[0], MODEL.product.m)
+
+
+# --------------------------------------------------------------------------- bounds
+
+
+def test_a_spawn_beyond_max_pieces_is_refused_for_the_excess() -> None:
+    eng = engine(feed=FeedParams(max_pieces=5), initial_pieces=table_i_pieces()[:3])
+    eng.spawn([resting(0.05 * math.cos(a), 0.05 * math.sin(a)) for a in np.arange(4.0)])
+    res = eng.tick()
+    assert res.count == 5 and res.spawned_ids.shape == (2,)
+    assert [(r.kind, r.count) for r in res.refusals] == [('spawn', 2)]
+    assert 'feed.max_pieces = 5' in res.refusals[0].reason
+    eng.spawn([resting(0.05, 0.0)])
+    res = eng.tick()
+    assert res.count == 5 and [r.count for r in res.refusals] == [1]
+    assert eng.tick().refusals == ()
+
+
+def test_the_feed_and_the_initial_pieces_respect_max_pieces() -> None:
+    eng = engine(feed=FeedParams(rate=500.0, max_pieces=7))
+    counts = [eng.tick().count for _ in range(20)]
+    assert max(counts) == 7
+    with pytest.raises(ScenarioError, match='exceed feed.max_pieces = 2'):
+        EngineConfig(feed=FeedParams(max_pieces=2), initial_pieces=table_i_pieces())
+
+
+def test_the_input_queue_is_bounded() -> None:
+    eng = engine()
+    for k in range(MAX_PENDING_INPUTS):
+        eng.command(float(k % 5))
+    with pytest.raises(InputError, match=f'{MAX_PENDING_INPUTS} inputs are already waiting'):
+        eng.command(1.0)
+    with pytest.raises(InputError):
+        eng.spawn([resting(0.05, 0.0)])
+    assert len(eng.tick().applied) == MAX_PENDING_INPUTS
+    eng.command(1.0)  # the queue is empty again after the tick
+
+
+def test_spawns_above_the_highest_start_are_refused() -> None:
+    eng = engine(spawn_max_height=0.5)
+    with pytest.raises(ScenarioError, match='above the highest start 0.5 m'):
+        eng.spawn([(0.05, 0.0, 0.6)])
+    with pytest.raises(ScenarioError, match='above the highest start'):
+        eng.spawn([(0.05, 0.0, 1e300)])
+    eng.spawn([(0.05, 0.0, 0.5)])
+    assert eng.tick().count == 1
+
+
+def test_failed_pieces_are_reported_with_their_mass_and_the_mass_balances() -> None:
+    # max_steps = 1 per tick: every piece that needs more than one step fails
+    eng = engine(solver=SolverParams(max_steps=1), initial_pieces=table_i_pieces(),
+                 feed=FeedParams(rate=50.0))
+    failures = []
+    for _ in range(10):
+        res = eng.tick()
+        failures += res.failures
+        on_cone = float(res.masses.sum())
+        assert res.mass_in == pytest.approx(
+            on_cone + float(res.channel_mass.sum()) + res.failed_mass, rel=1e-12, abs=1e-15)
+    assert failures and res.failed_mass == pytest.approx(sum(f.mass for f in failures))
+    first = failures[0]
+    assert 'max_steps' in first.reason and first.mass > 0.0
+    assert np.all(np.isfinite(first.position)) and np.all(np.isfinite(first.velocity))
+
+
+def test_mass_balance_with_exits_spawns_and_a_reset() -> None:
+    eng = engine(feed=FeedParams(rate=20.0), initial_pieces=table_i_pieces())
+    eng.command(8.0)
+    exited = 0
+    for k in range(150):
+        if k == 100:
+            eng.reset()
+        if k % 10 == 5:
+            eng.spawn([resting(0.2, 0.0)], velocities=[(1.0, 0.0, 0.0)])
+        res = eng.tick()
+        exited += len(res.exits)
+        assert res.mass_in == pytest.approx(
+            float(res.masses.sum()) + float(res.channel_mass.sum()) + res.failed_mass,
+            rel=1e-12)
+    assert exited > 0
