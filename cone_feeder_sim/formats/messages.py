@@ -30,12 +30,13 @@ from typing import Any
 
 import numpy as np
 
-from .cdr import CdrCodec, default_codec
+from .cdr import CdrCodec, CdrError, default_codec
 from .pointcloud import EXIT_DTYPE, point_fields, STATE_DTYPE
 from ..physics.params import ModelParams
 from ..physics.simulation import ExitEvents
 
 __all__ = [
+    'pose_array_positions',
     'MarkerBuilder',
     'MarkerSchedule',
     'channel_mass_message',
@@ -137,6 +138,50 @@ def cone_state_message(head: dict[str, Any], angle: float, omega: float) -> dict
 
 
 # --------------------------------------------------------------------------- markers
+
+
+#: CDR encapsulation headers (little and big endian, XCDR1 and XCDR2 plain).
+_LITTLE_ENDIAN = (b'\x00\x01', b'\x00\x07')
+_BIG_ENDIAN = (b'\x00\x00', b'\x00\x06')
+#: float64 per geometry_msgs/Pose: position x, y, z, orientation x, y, z, w.
+_POSE_FLOATS = 7
+
+
+def pose_array_positions(data: bytes) -> tuple[str, np.ndarray]:
+    """
+    Return the frame_id and the positions (M, 3) (m) of a serialized PoseArray.
+
+    Reads the CDR bytes directly with numpy (no per-pose Python objects), so a message of a
+    million poses takes milliseconds; orientations are not read. Raises CdrError for
+    bytes that are not a complete PoseArray.
+    """
+    view = memoryview(data)
+    if len(view) < 16:
+        raise CdrError(f'a PoseArray needs at least 16 bytes, got {len(view)}')
+    kind = bytes(view[:2])
+    if kind not in _LITTLE_ENDIAN + _BIG_ENDIAN:
+        raise CdrError(f'unknown CDR encapsulation {kind.hex()}')
+    order = '<' if kind in _LITTLE_ENDIAN else '>'
+    body = view[4:]
+    (length,) = np.frombuffer(body, dtype=f'{order}u4', count=1, offset=8)
+    pos = 12 + int(length)
+    if length == 0 or pos > len(body):
+        raise CdrError(f'PoseArray frame_id of {int(length)} bytes does not fit in the message')
+    frame_id = bytes(body[12:pos - 1]).decode('utf-8', errors='replace')
+    pos = (pos + 3) & ~3
+    if pos + 4 > len(body):
+        raise CdrError('PoseArray ends before its pose count')
+    (count,) = np.frombuffer(body, dtype=f'{order}u4', count=1, offset=pos)
+    if count == 0:
+        return frame_id, np.zeros((0, 3))
+    pos = (pos + 4 + 7) & ~7
+    need = pos + int(count) * _POSE_FLOATS * 8
+    if need > len(body):
+        raise CdrError(f'PoseArray says {int(count)} poses but holds {len(body) - pos} bytes '
+                       'for them')
+    poses = np.frombuffer(body, dtype=f'{order}f8', count=int(count) * _POSE_FLOATS,
+                          offset=pos).reshape(-1, _POSE_FLOATS)
+    return frame_id, poses[:, :3].astype(np.float64)
 
 
 def _color(r: float, g: float, b: float, a: float = 1.0) -> dict[str, float]:

@@ -38,6 +38,7 @@ from collections.abc import Iterable, Mapping
 import dataclasses
 import datetime
 import json
+import math
 import os
 from pathlib import Path
 import queue
@@ -60,13 +61,14 @@ from ..feeder.engine import (
 from ..feeder.scenario import Scenario
 from ..physics.params import (
     CHANNEL_KEYS, MODEL_KEYS, ModelParams, P_M, PRODUCT_LIMITS, ProductParams, SolverParams)
-from ..physics.simulation import Simulator, StepResult
+from ..physics.simulation import Failure, Simulator, StepResult
 
 __all__ = [
     'DEFAULT_RECORD_PATH',
     'END_METADATA_NAME',
     'FORMAT_VERSION',
     'INPUT_EVENTS',
+    'failure_event',
     'METADATA_NAME',
     'RunRecorder',
     'ScenarioRecorder',
@@ -204,6 +206,21 @@ def input_event(tick: int, t: float, item: EngineInput) -> dict[str, Any]:
     else:
         raise ConeFeederError(f'unknown engine input {item!r}')
     return event
+
+
+def failure_event(tick: int, failure: Failure) -> dict[str, Any]:
+    """
+    Return the event of a piece removed by a failed integration during tick ``tick``.
+
+    Non-finite coordinates (a state that blew up) are written as null.
+    """
+    def finite(values: Iterable[float]) -> list[float | None]:
+        return [float(v) if math.isfinite(v) else None for v in values]
+
+    return {'event': 'failure', 'tick': int(tick), 't': float(failure.t),
+            'id': int(failure.particle_id), 'reason': failure.reason,
+            'position': finite(failure.position), 'velocity': finite(failure.velocity),
+            'mass': float(failure.mass)}
 
 
 def event_text(event: Mapping[str, Any]) -> str:

@@ -116,8 +116,9 @@ class Failure:
     """
     A piece whose integration failed and which was removed.
 
-    t (s) the time of the failure; reason: one of FAILURE_REASONS; position (m) and velocity (m/s) in the world frame at t (NaN where the state
-    was no longer finite); mass (kg).
+    t (s) the time of the failure; reason: one of FAILURE_REASONS; position (m) and
+    velocity (m/s) in the world frame at t (NaN where the state was no longer finite);
+    mass (kg).
     """
 
     particle_id: int

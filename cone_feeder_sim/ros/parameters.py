@@ -250,6 +250,9 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
                   'the cone', dynamic=True, limit=ENGINE_LIMITS['max_pieces']),
         ParamSpec('feed.seed', 0, 'seed of the random generator of the feed',
                   limit=ENGINE_LIMITS['seed']),
+        ParamSpec('spawn.max_height', 1.0, 'highest start of a spawned piece (m, z of its centre '
+                  'above the cone base); spawn poses above it are refused',
+                  limit=ENGINE_LIMITS['spawn_max_height']),
         ParamSpec('markers.rate', 10.0, 'marker messages per second of simulated time (at most '
                   'one per tick); 0 = none', dynamic=True, limit=NODE_LIMITS['markers.rate']),
         ParamSpec('diagnostics.period', 1.0, 'wall-clock seconds between /diagnostics messages',
@@ -323,4 +326,5 @@ def engine_config_from_values(values: dict[str, Any], base: ModelParams) -> Engi
         for i, p in enumerate(positions))
     return EngineConfig(model=model, solver=solver, dt=1.0 / values['update_rate'],
                         drive=drive_from_values(values), feed=feed_from_values(values),
-                        initial_pieces=pieces, seed=values['feed.seed'])
+                        initial_pieces=pieces, seed=values['feed.seed'],
+                        spawn_max_height=values['spawn.max_height'])

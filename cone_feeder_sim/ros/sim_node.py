@@ -131,18 +131,22 @@ from ..formats.cdr import CdrError, default_codec
 from ..formats.mcap_writer import COMPRESSIONS
 from ..formats.messages import (
     channel_mass_message, clock_message, cone_state_message, exits_message, header, MarkerBuilder,
-    MarkerSchedule, particles_message, stamp, stamp_ns, states_message)
+    MarkerSchedule, particles_message, pose_array_positions, stamp, stamp_ns, states_message)
 from ..formats.parameter_file import load_model_params
 from ..formats.runlog import (
-    engine_config_json, engine_input_from_event, event_text, expand_record_path, FORMAT_VERSION,
-    input_event, INPUT_EVENTS, METADATA_NAME, parameter_text, RunRecorder, to_jsonable)
+    engine_config_json, engine_input_from_event, event_text, expand_record_path, failure_event,
+    FORMAT_VERSION, input_event, INPUT_EVENTS, METADATA_NAME, parameter_text, RunRecorder,
+    to_jsonable)
 from ..formats.topics import COMMAND_QOS, MessageRecord, QosProfile, TOPICS
 from ..physics.params import model_params_from_mapping
-from ..physics.simulation import check_positions
+from ..physics.simulation import position_problems
 
 __all__ = ['SimNode', 'TopicInfo', 'main']
 
 NODE_NAME = 'sim_node'
+#: Received messages larger than this (bytes) are not recorded whole (a million-pose spawn
+#: is 56 MB); the inputs the engine applied from them are.
+MAX_RECORDED_INPUT_BYTES = 4 * 1024 * 1024
 
 # --------------------------------------------------------------------------- hooks
 
@@ -423,10 +427,20 @@ class SimNode(GuardedNode):
         """Refuse a live input while re-simulating; return whether it was refused."""
         if not self._resim_active:
             return False
-        self._refused += 1
-        self.get_logger().warning(f'{what} refused: re-simulating a recording',
-                                  throttle_duration_sec=1.0)
+        self._refuse(what, 1, 're-simulating a recording')
         return True
+
+    def _refuse(self, what: str, count: int, reason: str, text: str | None = None) -> None:
+        """
+        Count, log and record refused input: ``count`` items of ``what`` with the reason.
+
+        The refusal is an event on ~/events (so it is in the recording); the log line
+        (``text``, default ``<what> refused: <reason>``) is throttled.
+        """
+        self._refused += count
+        self.get_logger().warning(text or f'{what} refused: {reason}',
+                                  throttle_duration_sec=1.0)
+        self._node_event('refused', input=what, count=count, reason=reason)
 
     # ------------------------------------------------------------------ plumbing
 
@@ -506,18 +520,31 @@ class SimNode(GuardedNode):
 
     # ------------------------------------------------------------------ inputs
 
+    def _received(self, topic: str, type_name: str, data: bytes) -> None:
+        """
+        Pass a received message to the hooks (the recording).
+
+        A message larger than MAX_RECORDED_INPUT_BYTES is not passed on whole: an
+        ``input_not_recorded`` event says so (what it changed is recorded as applied inputs).
+        """
+        if not self._hooks:
+            return
+        if len(data) > MAX_RECORDED_INPUT_BYTES:
+            self._node_event('input_not_recorded', topic=topic, bytes=len(data),
+                             reason=f'larger than {MAX_RECORDED_INPUT_BYTES} bytes')
+            return
+        self._emit(MessageRecord('in', topic, type_name, bytes(data), self._now_ns(),
+                                 time.time_ns()))
+
     def _on_rotation_cmd(self, data: bytes) -> None:
-        if self._hooks:
-            self._emit(MessageRecord('in', self._sub_cmd.topic_name, 'std_msgs/msg/Float64',
-                                     bytes(data), self._now_ns(), time.time_ns()))
+        self._received(self._sub_cmd.topic_name, 'std_msgs/msg/Float64', data)
         if self._refuse_live('rotation_cmd'):
             return
         try:
             value = self._codec.decode('std_msgs/msg/Float64', data, strict=False)['data']
             self._engine.command(value)
         except (CdrError, ConeFeederError) as exc:
-            self._refused += 1
-            self.get_logger().warning(f'rotation_cmd refused: {exc}', throttle_duration_sec=1.0)
+            self._refuse('rotation_cmd', 1, str(exc))
             return
         limit = self._engine.drive.max_angular_velocity
         if abs(value) > limit:
@@ -526,51 +553,38 @@ class SimNode(GuardedNode):
                 throttle_duration_sec=5.0)
 
     def _on_spawn(self, data: bytes) -> None:
-        if self._hooks:
-            self._emit(MessageRecord('in', self._sub_spawn.topic_name,
-                                     'geometry_msgs/msg/PoseArray', bytes(data),
-                                     self._now_ns(), time.time_ns()))
+        self._received(self._sub_spawn.topic_name, 'geometry_msgs/msg/PoseArray', data)
         if self._refuse_live('spawn'):
             return
         try:
-            msg = self._codec.decode('geometry_msgs/msg/PoseArray', data, strict=False)
+            frame, positions = pose_array_positions(data)
         except CdrError as exc:
-            self._refused += 1
-            self.get_logger().warning(f'spawn refused: cannot decode the message: {exc}')
+            self._refuse('spawn', 1, f'cannot decode the message: {exc}')
             return
-        frame = msg['header']['frame_id']
+        total = positions.shape[0]
         if frame not in ('', self._frame):
-            self._refused += 1
-            self.get_logger().warning(
-                f'spawn refused: poses are in frame {frame!r}, expected {self._frame!r} '
-                '(or an empty frame_id)')
+            self._refuse('spawn', total, f'poses are in frame {frame!r}, expected '
+                         f'{self._frame!r} (or an empty frame_id)')
             return
-        model = self._engine.model
-        valid = []
-        problems = []
-        for i, pose in enumerate(msg['poses']):
-            p = pose['position']
-            point = np.array([[p['x'], p['y'], p['z']]])
-            try:
-                if not np.all(np.isfinite(point)):
-                    raise ConeFeederError(f'position {point[0].tolist()} is not finite')
-                check_positions(model, point)
-            except ConeFeederError as exc:
-                problems.append(f'pose {i}: {str(exc).replace("position[0] ", "")}')
-                continue
-            valid.append(point[0])
+        valid, problems = position_problems(self._engine.model, positions,
+                                            self._engine.config.spawn_max_height)
         if problems:
-            self._refused += len(problems)
-            self.get_logger().warning(
-                f'spawn: refused {len(problems)} of {len(msg["poses"])} poses: '
-                + '; '.join(problems[:5]) + (' ...' if len(problems) > 5 else ''))
-        if valid:
-            positions = np.array(valid)
+            reason = ('; '.join(problems[:5]) + (' ...' if len(problems) > 5 else '')
+                      ).replace('position[', 'pose [')
+            self._refuse('spawn', len(problems), reason,
+                         f'spawn: refused {len(problems)} of {total} poses: {reason}')
+        positions = positions[valid]
+        limit = self._engine.feed.max_pieces
+        if positions.shape[0] > limit:
+            excess = positions.shape[0] - limit
+            self._refuse('spawn', excess, f'{excess} of {total} poses beyond feed.max_pieces = '
+                         f'{limit} pieces on the cone')
+            positions = positions[:limit]
+        if positions.shape[0]:
             try:
                 self._engine.spawn(positions, velocities=np.zeros_like(positions))
             except ConeFeederError as exc:
-                self._refused += len(valid)
-                self.get_logger().warning(f'spawn refused: {exc}')
+                self._refuse('spawn', positions.shape[0], str(exc))
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response
                   ) -> Trigger.Response:
@@ -706,6 +720,9 @@ class SimNode(GuardedNode):
             self.get_logger().warning(
                 f'piece {failure.particle_id} removed at t = {failure.t:.6f} s: '
                 f'{failure.reason} (at {failure.position})')
+            self._publish_event(failure_event(result.index, failure), stamp_ns(failure.t))
+        for refusal in result.refusals:
+            self._refuse(refusal.kind, refusal.count, refusal.reason)
         if result.reset:
             self._markers.restart()
         if self._resim_active and self._engine.tick_index >= self._resim.ticks:
@@ -772,6 +789,9 @@ class SimNode(GuardedNode):
             'rejected steps': str(window.rejected),
             'exits (total)': str(self._total_exits),
             'failures (total)': str(self._total_failures),
+            'mass in (kg)': f'{res.mass_in:.6f}' if res is not None else '0',
+            'mass exited (kg)': f'{res.channel_mass.sum():.6f}' if res is not None else '0',
+            'mass failed (kg)': f'{res.failed_mass:.6f}' if res is not None else '0',
             'refused inputs (total)': str(self._refused),
             'cone omega (rad/s)': f'{self._engine.omega:.4f}',
             'drive mode': res.mode if res is not None else 'not started',

@@ -61,6 +61,7 @@ VALIDATION: dict[str, Callable[[Any], object]] = {
     'feed.mass_rel_std': _feed('mass_rel_std'),
     'feed.max_pieces': _feed('max_pieces'),
     'feed.seed': lambda value: EngineConfig(seed=value),
+    'spawn.max_height': lambda value: EngineConfig(spawn_max_height=value),
 }
 
 #: The tables the node's ranges must come from.
