@@ -314,3 +314,31 @@ def test_read_only_directory_is_refused_at_start(ros: Ros, tmp_path: Path) -> No
             ros.sim(record_path=str(readonly / 'run.mcap'))
     finally:
         readonly.chmod(0o700)
+
+
+def test_resimulation_reproduces_failed_pieces(tmp_path: Path) -> None:
+    original = tmp_path / 'original.mcap'
+    again = tmp_path / 'again.mcap'
+    first = Ros()
+    try:
+        # max_steps = 1: pieces that need more than one step in a tick fail
+        sim = first.sim(record_path=str(original), real_time_factor=0.0,
+                        **{'solver.max_steps': 1, 'feed.rate': 50.0})
+        assert first.spin_until(lambda: sim.engine.tick_index >= 30, 60.0)
+        sim.set_paused(True)
+        ticks = sim.engine.tick_index
+    finally:
+        first.close()
+    second = Ros()
+    try:
+        sim = second.sim(replay_commands=str(original), record_path=str(again),
+                         real_time_factor=0.0)
+        assert second.spin_until(lambda: not sim.replaying, 120.0)
+        assert sim.engine.tick_index == ticks
+    finally:
+        second.close()
+    a, b = read_bag(original), read_bag(again)
+    failed_a = [e for e in events(a, '/sim_node/events') if e['event'] == 'failure']
+    failed_b = [e for e in events(b, '/sim_node/events') if e['event'] == 'failure']
+    assert failed_a and failed_a == failed_b
+    assert {'id', 't', 'position', 'velocity', 'mass', 'reason'} <= set(failed_a[0])
