@@ -53,7 +53,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Float64, Float64MultiArray
 
-from .parameters import declare, ParamSpec
+from .parameters import declare, init_or_exit, ParamSpec, warn_unknown_parameters
 from .qos import rclpy_qos
 from ..formats.pointcloud import cloud_points
 from ..formats.topics import TOPICS
@@ -102,6 +102,7 @@ class ExampleController(Node):
         """Declare the parameters and create the subscriptions, publisher and timers."""
         super().__init__(kwargs.pop('node_name', 'example_controller'), **kwargs)
         values = {spec.name: declare(self, spec).value for spec in PARAMETERS}
+        warn_unknown_parameters(self)
         self.speed = values['speed']
         self.period = values['period']
         rate = values['command_rate']
@@ -168,7 +169,8 @@ class ExampleController(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Run the controller until shut down; return the process exit status."""
-    rclpy.init(args=args)
+    if not init_or_exit(args, 'example_controller'):
+        return 1
     node = None
     try:
         node = ExampleController()

@@ -24,10 +24,13 @@ configuration; they need no ROS.
 """
 
 from dataclasses import dataclass, fields
+import difflib
 from functools import cache
+import sys
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+import rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -48,6 +51,8 @@ __all__ = [
     'ParamSpec',
     'RUN_PARAMETERS',
     'declare',
+    'init_or_exit',
+    'warn_unknown_parameters',
     'drive_from_values',
     'engine_config_from_values',
     'feed_from_values',
@@ -139,6 +144,41 @@ class ParamSpec:
                 desc.floating_point_range = [FloatingPointRange(
                     from_value=float(self.limit.lo), to_value=float(self.limit.hi), step=0.0)]
         return desc
+
+
+def init_or_exit(args: list[str] | None, name: str) -> bool:
+    """
+    Initialise rclpy; on a bad command line or parameter file, print one line and say no.
+
+    rcl reports an unparsable ``--params-file`` by raising from ``rclpy.init``; a node's
+    ``main`` returns 1 when this returns False, with no traceback.
+    """
+    try:
+        rclpy.init(args=args)
+    except RuntimeError as exc:  # rclpy's RCLError
+        sys.stderr.write(f'[FATAL] [{name}]: cannot start: {exc}\n')
+        return False
+    return True
+
+
+def warn_unknown_parameters(node: Node) -> list[str]:
+    """
+    Warn about overrides (parameter files, ``-p``) that name no parameter of the node.
+
+    A misspelt name would otherwise be silently ignored; like Nav2 and Gazebo users expect,
+    the node starts and each unknown name is logged with the closest valid name. Returns the
+    warnings.
+    """
+    declared = sorted(node._parameters)  # rclpy has no public list of either
+    warnings = []
+    for name in sorted(set(node._parameter_overrides) - set(declared)):
+        close = difflib.get_close_matches(name, declared, n=1, cutoff=0.6)
+        hint = f'; did you mean {close[0]!r}?' if close else ''
+        warnings.append(f'parameter {name!r} is not a parameter of {node.get_name()} and is '
+                        f'ignored{hint}')
+    for text in warnings:
+        node.get_logger().warning(text)
+    return warnings
 
 
 def declare(node: Node, spec: ParamSpec, value: Any = None, **kwargs: Any) -> Parameter:

@@ -58,7 +58,7 @@ from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMessage
 
 from .guarded_node import GuardedNode
-from .parameters import declare, ParamSpec
+from .parameters import declare, init_or_exit, ParamSpec, warn_unknown_parameters
 from .qos import rclpy_qos
 from ..errors import ConeFeederError, ParameterError
 from ..formats.mcap_reader import open_recording, RecordedMessage, Recording
@@ -128,6 +128,7 @@ class ReplayNode(GuardedNode):
         self._progress_period = float(self._declare(
             'progress_period', 1.0, 'wall-clock s between progress reports',
             Limit(0.05, 3600.0, 's')))
+        warn_unknown_parameters(self)
         if not path:
             raise ParameterError('parameter path is required: the MCAP file to replay')
         if not self._rate > 0.0:
@@ -312,7 +313,8 @@ class ReplayNode(GuardedNode):
 
 def main(args: list[str] | None = None) -> int:
     """Replay until the end (or until shut down); return the process exit status."""
-    rclpy.init(args=args)
+    if not init_or_exit(args, NODE_NAME):
+        return 1
     node = None
     status = 0
     try:

@@ -120,8 +120,8 @@ from visualization_msgs.msg import MarkerArray
 
 from .guarded_node import GuardedNode
 from .parameters import (
-    declare, drive_from_values, engine_config_from_values, feed_from_values, LIVE_PARAMETERS,
-    parameter_specs, ParamSpec, RUN_PARAMETERS)
+    declare, drive_from_values, engine_config_from_values, feed_from_values, init_or_exit,
+    LIVE_PARAMETERS, parameter_specs, ParamSpec, RUN_PARAMETERS, warn_unknown_parameters)
 from .qos import rclpy_qos
 from .resim import load_resim_plan, ResimPlan
 from .. import __version__
@@ -273,6 +273,7 @@ class SimNode(GuardedNode):
                                              self._publish_diagnostics, clock=self._steady)
         self._flush_timer = (self.create_timer(0.25, self._on_flush_timer, clock=self._steady)
                              if self._recorder is not None else None)
+        warn_unknown_parameters(self)
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.get_logger().info(
@@ -815,7 +816,8 @@ def main(args: list[str] | None = None) -> int:
     is finished in every path by destroy_node(), with both signals blocked meanwhile so that
     a second Ctrl-C cannot cut the file short.
     """
-    rclpy.init(args=args)
+    if not init_or_exit(args, NODE_NAME):
+        return 1
     node = None
     status = 0
     try:

@@ -1,0 +1,58 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Start-up problems of the nodes are one line each, never a traceback.
+
+An unparsable parameter file ends the process with status 1 and one FATAL line; a misspelt
+parameter name is a warning naming the closest valid name (the node starts).
+"""
+
+from pathlib import Path
+import subprocess
+import sys
+
+from cone_feeder_sim.ros.parameters import warn_unknown_parameters
+from cone_feeder_sim.ros.sim_node import SimNode
+import pytest
+from rclpy.parameter import Parameter
+import sim_process
+
+MODULES = ('cone_feeder_sim.ros.sim_node', 'cone_feeder_sim.ros.replay_node',
+           'cone_feeder_sim.ros.example_controller')
+
+
+@pytest.mark.parametrize('module', MODULES)
+def test_an_unparsable_parameter_file_is_one_line_and_status_1(tmp_path: Path,
+                                                                 module: str) -> None:
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('/**/sim_node:\n  ros__parameters:\n    feed: {rate: [1,\n')
+    done = subprocess.run([sys.executable, '-m', module, '--ros-args', '--params-file',
+                           str(bad)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    assert 'Traceback' not in done.stderr + done.stdout
+    fatal = [line for line in done.stderr.splitlines() if '[FATAL]' in line]
+    assert len(fatal) == 1 and 'cannot start' in fatal[0] and 'bad.yaml' in fatal[0]
+
+
+def test_misspelt_parameters_are_named_with_the_closest_valid_name() -> None:
+    with sim_process.InProcess('test_startup', timeout=20.0, spin_step=0.02) as ros:
+        node = ros.add(SimNode(context=ros.context, parameter_overrides=[
+            Parameter('record_path', value=''), Parameter('feed.rat', value=3.0),
+            Parameter('real_time_factr', value=2.0), Parameter('zzz', value=1)]))
+        warnings = warn_unknown_parameters(node)
+    assert len(warnings) == 3
+    assert "'feed.rat'" in warnings[0] and "did you mean 'feed.rate'" in warnings[0]
+    assert "did you mean 'real_time_factor'" in warnings[1]
+    assert "'zzz'" in warnings[2] and 'did you mean' not in warnings[2]
