@@ -34,8 +34,8 @@ MODULES = ('cone_feeder_sim.ros.sim_node', 'cone_feeder_sim.ros.replay_node',
 
 
 @pytest.mark.parametrize('module', MODULES)
-def test_an_unparsable_parameter_file_is_one_line_and_status_1(tmp_path: Path,
-                                                                 module: str) -> None:
+def test_an_unparsable_parameter_file_is_one_line_and_status_1(
+        tmp_path: Path, module: str) -> None:
     bad = tmp_path / 'bad.yaml'
     bad.write_text('/**/sim_node:\n  ros__parameters:\n    feed: {rate: [1,\n')
     done = subprocess.run([sys.executable, '-m', module, '--ros-args', '--params-file',
