@@ -27,7 +27,7 @@ readers that want the records themselves. :func:`load_resim_plan` turns a record
 by tick index.
 """
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
@@ -42,6 +42,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from .mcap_writer import _open_for_writing, LIBRARY
+from .run_recorder import part_path, PART_METADATA_NAME
 from ..errors import RecordingError
 
 try:  # zstandard is optional for mcap; only needed to recognise its errors here.
@@ -56,6 +57,9 @@ __all__ = [
     'RecordStream',
     'open_recording',
     'recover_mcap',
+    'run_parts',
+    'RunSource',
+    'SplitRecording',
 ]
 
 
@@ -337,19 +341,125 @@ def _scan(path: Path) -> Recording:
     return Recording(path, False, topics, metadata, start, end, total, problem, channels)
 
 
-def open_recording(path: str | os.PathLike) -> Recording:
-    """
-    Open a recording: through its index when complete, else its readable beginning.
+#: What names a recording: a file (the first of a split run), a directory, or a list of files.
+RunSource = str | os.PathLike | Sequence[str | os.PathLike]
 
-    Raises RecordingError when the file cannot be opened or does not start as MCAP.
-    """
-    path = Path(path)
+
+def _open_file(path: Path) -> Recording:
+    """Open one file: through its index when complete, else its readable beginning."""
     with _open(path) as stream:
         magic = stream.read(8)
     if magic != b'\x89MCAP0\r\n':
         raise RecordingError(f'{str(path)!r} is not an MCAP file (wrong magic bytes)')
     recording = _read_complete(path)
     return recording if recording is not None else _scan(path)
+
+
+def run_parts(source: RunSource) -> list[Path]:
+    """
+    Return the files of a recording in order.
+
+    ``source`` is a list of files (taken as given), a directory (its ``.mcap`` files, the
+    parts of each run in order) or one file: the first file of a run split by the recorder
+    brings its parts ``<stem>_2.mcap``, ``<stem>_3.mcap``... along (as long as they exist
+    and their ``cone_feeder_sim.part`` record names the same run).
+    """
+    if not isinstance(source, (str, os.PathLike)):
+        paths = [Path(p) for p in source]
+        if not paths:
+            raise RecordingError('an empty list of recordings')
+        return paths
+    path = Path(source)
+    if path.is_dir():
+        files = sorted(path.glob('*.mcap'))
+        if not files:
+            raise RecordingError(f'{str(path)!r} holds no .mcap file')
+        stems = {f.stem for f in files}
+
+        def is_part(file: Path) -> bool:  # <stem>_<n> next to <stem>
+            head, _, tail = file.stem.rpartition('_')
+            return tail.isdigit() and head in stems
+
+        ordered: list[Path] = []
+        for first in (f for f in files if not is_part(f)):
+            ordered += run_parts(first)
+        return ordered + [f for f in files if f not in ordered]
+    parts = [path]
+    run = _part_record(path).get('run')
+    while run is not None:
+        following = part_path(path, len(parts) + 1)
+        if not following.is_file() or _part_record(following).get('run') != run:
+            break
+        parts.append(following)
+    return parts
+
+
+def _part_record(path: Path) -> dict[str, str]:
+    """Return the ``cone_feeder_sim.part`` record of a file ({} if none or unreadable)."""
+    try:
+        return _open_file(path).metadata.get(PART_METADATA_NAME, {})
+    except RecordingError:
+        return {}
+
+
+class SplitRecording:
+    """
+    A recording in several files, read as one: the parts' messages one after the other.
+
+    Same interface as :class:`Recording`: ``path`` is the first file, ``paths`` all of
+    them; ``metadata`` merges the parts' records (the end record is the last part's).
+    """
+
+    def __init__(self, parts: list[Recording]) -> None:
+        """Combine opened parts (in order)."""
+        self.parts = parts
+        self.path = parts[0].path
+        self.paths = [part.path for part in parts]
+        self.complete = all(part.complete for part in parts)
+        self.topics: dict[str, RecordedTopic] = {}
+        for part in parts:
+            for topic, info in part.topics.items():
+                known = self.topics.get(topic)
+                count = info.message_count + (known.message_count if known else 0)
+                self.topics[topic] = RecordedTopic(topic, info.type_name, info.offered_qos,
+                                                   count)
+        self.metadata: dict[str, dict[str, str]] = {}
+        for part in parts:
+            self.metadata.update(part.metadata)
+        starts = [p.start_ns for p in parts if p.start_ns is not None]
+        ends = [p.end_ns for p in parts if p.end_ns is not None]
+        self.start_ns = starts[0] if starts else None
+        self.end_ns = ends[-1] if ends else None
+        self.message_count = sum(part.message_count for part in parts)
+
+    @property
+    def problem(self) -> str | None:
+        """Return the first part's problem, naming the part (None if all read fine)."""
+        for part in self.parts:
+            if part.problem:
+                return f'{part.path.name}: {part.problem}'
+        return None
+
+    def messages(self, topics: set[str] | None = None, start_ns: int | None = None,
+                 end_ns: int | None = None) -> Iterator[RecordedMessage]:
+        """Yield the messages of every part in turn (see :meth:`Recording.messages`)."""
+        for part in self.parts:
+            if start_ns is not None and part.end_ns is not None and part.end_ns < start_ns:
+                continue
+            if end_ns is not None and part.start_ns is not None and part.start_ns > end_ns:
+                return
+            yield from part.messages(topics, start_ns, end_ns)
+
+
+def open_recording(source: RunSource) -> Recording | SplitRecording:
+    """
+    Open a recording: one file, or every part of a split run (see :func:`run_parts`).
+
+    Complete files are read through their index, others up to their first unreadable
+    record. Raises RecordingError when a file cannot be opened or does not start as MCAP.
+    """
+    parts = [_open_file(path) for path in run_parts(source)]
+    return parts[0] if len(parts) == 1 else SplitRecording(parts)
 
 
 def recover_mcap(source: str | os.PathLike, destination: str | os.PathLike) -> int:

@@ -77,6 +77,14 @@ COMPRESSIONS: dict[str, CompressionType] = {
 }
 
 
+def _close_stream(stream: BinaryIO) -> None:
+    """Close a stream whose buffered bytes cannot be written (they are dropped)."""
+    try:
+        stream.close()
+    except OSError:
+        pass
+
+
 def _open_for_writing(path: pathlib.Path) -> BinaryIO:
     try:
         return open(path, 'wb')
@@ -139,6 +147,10 @@ class McapRecorder:
         except McapError as err:  # e.g. the compression library is missing
             self._stream.close()
             raise RecordingError(f'cannot start MCAP file {str(self._path)!r}: {err}') from err
+        except OSError as err:  # e.g. no space left on the device
+            _close_stream(self._stream)
+            raise RecordingError(f'cannot write MCAP file {str(self._path)!r}: '
+                                 f'{err.strerror or err}') from err
         except BaseException:
             self._stream.close()
             raise
@@ -150,6 +162,12 @@ class McapRecorder:
     def path(self) -> pathlib.Path:
         """Return the path of the file being written."""
         return self._path
+
+    @property
+    def size_bytes(self) -> int:
+        """Return the bytes in the file so far plus those of the open chunk (uncompressed)."""
+        with self._lock:
+            return self._stream.tell() + self._pending_bytes
 
     @property
     def closed(self) -> bool:

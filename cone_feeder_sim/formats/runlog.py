@@ -28,9 +28,8 @@ A run log is one MCAP file in the ROS 2 layout written by
   ``reconfigure``) carry the index of the tick that applied them and everything needed to
   apply them again (:func:`input_event`, :func:`engine_input_from_event`); ``parameters``,
   ``pause``, ``resume`` and ``step`` record what happened at the node;
-* :class:`RunRecorder`: the node's recorder. Messages are queued by the node's thread and
-  written by a background thread (chunks compressed off the timer's path), flushed at least
-  every :data:`FLUSH_INTERVAL_S` of wall-clock time;
+* the node's recorder is :class:`~cone_feeder_sim.formats.run_recorder.RunRecorder` (a
+  writer thread, split files, a free-space guard);
 * :class:`ScenarioRecorder`: the headless runner's recorder (same topics and schemas).
 """
 
@@ -41,20 +40,18 @@ import json
 import math
 import os
 from pathlib import Path
-import queue
-import threading
-import time
 from typing import Any
 
 import numpy as np
 
-from .mcap_writer import DEFAULT_CHUNK_SIZE, McapRecorder
+from .mcap_writer import McapRecorder
 from .messages import (
     channel_mass_message, cone_state_message, exits_message, header, MarkerBuilder, MarkerSchedule,
     particles_message, stamp_ns, states_message)
-from .topics import MessageRecord, QosProfile, RUNNER_TOPICS, TOPICS
+from .run_recorder import END_METADATA_NAME, make_parent_dir
+from .topics import RUNNER_TOPICS, TOPICS
 from .. import __version__
-from ..errors import ConeFeederError, RecordingError
+from ..errors import ConeFeederError
 from ..feeder.engine import (
     DriveParams, EngineConfig, EngineInput, FeedParams, Reconfigure, ResetRequest, RotationCommand,
     SpawnRequest)
@@ -70,7 +67,6 @@ __all__ = [
     'INPUT_EVENTS',
     'failure_event',
     'METADATA_NAME',
-    'RunRecorder',
     'ScenarioRecorder',
     'engine_config_json',
     'engine_input_from_event',
@@ -83,22 +79,12 @@ __all__ = [
 
 #: Name of the metadata record that describes a run.
 METADATA_NAME = 'cone_feeder_sim'
-#: Name of the metadata record written when a recording is closed (absent after a crash).
-END_METADATA_NAME = 'cone_feeder_sim.end'
 #: Version of the layout described here (metadata key ``format``).
 FORMAT_VERSION = '1'
 #: Default of the node's ``record_path``: strftime fields are filled in at the start.
 DEFAULT_RECORD_PATH = 'runs/sim_node_%Y%m%dT%H%M%S.mcap'
 #: Events that are engine inputs (re-simulation applies them again).
 INPUT_EVENTS = ('rotation', 'spawn', 'reset', 'reconfigure')
-#: Wall-clock seconds after which written data are in a finished chunk handed to the OS.
-FLUSH_INTERVAL_S = 0.5
-#: How often (wall-clock s) the writer thread wakes up when nothing arrives.
-_POLL_S = 0.1
-#: Token that only wakes the writer thread.
-_WAKE = object()
-#: Queued bytes beyond which the node waits for the writer (nothing is dropped).
-MAX_BACKLOG_BYTES = 256 * 1024 * 1024
 
 
 # --------------------------------------------------------------------------- metadata
@@ -173,15 +159,17 @@ def expand_record_path(template: str, now: datetime.datetime | None = None) -> P
     Return the recording path for a ``record_path`` value.
 
     strftime fields (``%Y%m%dT%H%M%S``) are filled in with the local time; when the template
-    has such fields and the file exists already, ``_2``, ``_3``... is appended to the stem
-    so that runs started in the same second do not overwrite each other.
+    has such fields and the file exists already, ``-2``, ``-3``... is appended to the stem
+    so that runs started in the same second do not collide (``_2`` would name the second
+    file of a split run). An explicit name is kept as it is: the recorder refuses to
+    overwrite an existing file.
     """
     now = now if now is not None else datetime.datetime.now()
     path = Path(now.strftime(template)) if '%' in template else Path(template)
     if '%' in template:
         stem, suffix, n = path.stem, path.suffix, 2
         while path.exists():
-            path = path.with_name(f'{stem}_{n}{suffix}')
+            path = path.with_name(f'{stem}-{n}{suffix}')
             n += 1
     return path
 
@@ -261,151 +249,6 @@ def engine_input_from_event(event: Mapping[str, Any]) -> EngineInput:
 # --------------------------------------------------------------------------- the node's recorder
 
 
-def _make_parent(path: Path) -> None:
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise RecordingError(
-            f'cannot create the directory {str(path.parent)!r} for the recording {str(path)!r}: '
-            f'{err.strerror or err}') from err
-
-
-class RunRecorder:
-    """
-    The MCAP recorder of a live node: cheap to call from the timer, written by a thread.
-
-    ``topics``: (resolved topic, type name, QoS) of every channel, registered at the start
-    so that every topic is in the file even when nothing was sent on it. ``metadata``:
-    records written at the start. :meth:`write` only queues the bytes; the writer thread
-    writes them and finishes a chunk at least every ``flush_interval_s`` (wall clock), so a
-    SIGKILL loses about that much. When the writer falls :data:`MAX_BACKLOG_BYTES` behind,
-    :meth:`write` waits (the simulation slows down; nothing is dropped). A write error
-    stops the recording (:attr:`error`); the caller keeps running. Thread-safe.
-    """
-
-    def __init__(self, path: str | os.PathLike, topics: Iterable[tuple[str, str, QosProfile]],
-                 metadata: Mapping[str, Mapping[str, str]], *,
-                 flush_interval_s: float = FLUSH_INTERVAL_S, compression: str = 'zstd',
-                 chunk_size: int = DEFAULT_CHUNK_SIZE,
-                 max_backlog_bytes: int = MAX_BACKLOG_BYTES) -> None:
-        """Create the file (and missing directories), write schemas, channels, metadata."""
-        path = Path(path)
-        _make_parent(path)
-        self._recorder = McapRecorder(path, flush_interval_s=flush_interval_s,
-                                      compression=compression, chunk_size=chunk_size)
-        try:
-            for topic, type_name, qos in topics:
-                self._recorder.add_topic(topic, type_name, qos)
-            for name, data in metadata.items():
-                self._recorder.add_metadata(name, data)
-            self._recorder.flush()
-        except BaseException:
-            self._recorder.close()
-            raise
-        # The caller's thread takes no lock that the writer thread needs: the only channel
-        # is a SimpleQueue (put is atomic and safe to interrupt), and each byte counter has
-        # one writer. A signal (SIGINT, SIGTERM) raised in the caller's thread while it held
-        # a lock, including the one inside threading.Event, can leave that lock held (the
-        # exception can land between acquiring it and entering the with block), and close()
-        # would then wait forever for a writer that can never take it.
-        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
-        self._queued_bytes = 0  # written only by the producer
-        self._done_bytes = 0  # written only by the writer thread
-        self._max_backlog = max_backlog_bytes
-        self._closed = False
-        self._written = 0
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name='mcap_writer', daemon=True)
-        self._thread.start()
-
-    @property
-    def path(self) -> Path:
-        """Return the path of the file."""
-        return self._recorder.path
-
-    @property
-    def error(self) -> BaseException | None:
-        """Return the error that stopped the recording, if any."""
-        return self._error
-
-    @property
-    def message_count(self) -> int:
-        """Return the number of messages written to the file so far."""
-        return self._written
-
-    @property
-    def closed(self) -> bool:
-        """Tell whether :meth:`close` has run."""
-        return self._closed
-
-    def write(self, topic: str, type_name: str, data: bytes, log_time_ns: int) -> None:
-        """Queue a serialized message for the file; log and publish time = log_time_ns."""
-        if self._closed or self._error is not None:
-            return
-        while (self._queued_bytes - self._done_bytes > self._max_backlog
-               and self._error is None and self._thread.is_alive()):
-            time.sleep(_POLL_S / 20)
-        self._queued_bytes += len(data)
-        self._queue.put((topic, type_name, data, log_time_ns))
-
-    def hook(self, record: MessageRecord) -> None:
-        """Queue a message of the node (its message hook); log time = its simulation time."""
-        self.write(record.topic, record.type_name, record.data, record.stamp_ns)
-
-    def maybe_flush(self) -> None:
-        """Wake the writer so that a due flush happens even when no message arrives."""
-        self._queue.put(_WAKE)
-
-    def _next_batch(self) -> tuple[list[tuple[str, str, bytes, int]], bool]:
-        """Return what is queued (waiting up to a poll period for it) and whether to stop."""
-        batch: list[tuple[str, str, bytes, int]] = []
-        stop = False
-        try:
-            item = self._queue.get(timeout=_POLL_S)
-        except queue.Empty:
-            return batch, stop
-        while True:
-            if item is None:
-                stop = True
-            elif item is not _WAKE:
-                batch.append(item)
-            try:
-                item = self._queue.get_nowait()
-            except queue.Empty:
-                return batch, stop
-
-    def _run(self) -> None:
-        while True:
-            batch, stop = self._next_batch()
-            if self._error is None:
-                try:
-                    for topic, type_name, data, log_time in batch:
-                        self._recorder.write_serialized(topic, type_name, data, log_time)
-                        self._written += 1
-                        self._done_bytes += len(data)
-                    self._recorder.maybe_flush()
-                except Exception as exc:  # noqa: B902 - kept and reported by the caller
-                    self._error = exc
-            else:
-                self._done_bytes += sum(len(item[2]) for item in batch)
-            if stop:
-                return
-
-    def close(self, end_metadata: Mapping[str, str] | None = None) -> None:
-        """Write what is queued, the end metadata, summary and footer; idempotent."""
-        if self._closed:
-            return
-        self._closed = True
-        self._queue.put(None)
-        self._thread.join()
-        try:
-            if end_metadata is not None and self._error is None:
-                self._recorder.add_metadata(END_METADATA_NAME, {
-                    **end_metadata, 'messages': str(self._written)})
-        finally:
-            self._recorder.close()
-
-
 # --------------------------------------------------------------------------- the runner's recorder
 
 
@@ -449,7 +292,7 @@ class ScenarioRecorder:
         """Create the file and write schemas, channels and the metadata."""
         self._names = {name: '/' + name for name in RUNNER_TOPICS}
         path = Path(path)
-        _make_parent(path)
+        make_parent_dir(path)
         self._recorder = McapRecorder(path)
         try:
             for name, topic in self._names.items():

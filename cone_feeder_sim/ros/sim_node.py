@@ -133,10 +133,10 @@ from ..formats.messages import (
     channel_mass_message, clock_message, cone_state_message, exits_message, header, MarkerBuilder,
     MarkerSchedule, particles_message, pose_array_positions, stamp, stamp_ns, states_message)
 from ..formats.parameter_file import load_model_params
+from ..formats.run_recorder import RunRecorder
 from ..formats.runlog import (
     engine_config_json, engine_input_from_event, event_text, expand_record_path, failure_event,
-    FORMAT_VERSION, input_event, INPUT_EVENTS, METADATA_NAME, parameter_text, RunRecorder,
-    to_jsonable)
+    FORMAT_VERSION, input_event, INPUT_EVENTS, METADATA_NAME, parameter_text, to_jsonable)
 from ..formats.topics import COMMAND_QOS, MessageRecord, QosProfile, TOPICS
 from ..physics.params import model_params_from_mapping
 from ..physics.simulation import position_problems

@@ -28,7 +28,8 @@ from cone_feeder_sim.errors import RecordingError
 from cone_feeder_sim.formats.cdr import default_message, encode
 from cone_feeder_sim.formats.mcap_reader import open_recording
 from cone_feeder_sim.formats.mcap_writer import McapRecorder
-from cone_feeder_sim.formats.runlog import event_text, FORMAT_VERSION, METADATA_NAME, RunRecorder
+from cone_feeder_sim.formats.run_recorder import RunRecorder
+from cone_feeder_sim.formats.runlog import event_text, FORMAT_VERSION, METADATA_NAME
 from cone_feeder_sim.formats.topics import qos_from_yaml, QosProfile, TOPICS
 from cone_feeder_sim.ros.resim import load_resim_plan
 import mcap.reader

@@ -36,9 +36,10 @@ from cone_feeder_sim.feeder.engine import (
     RotationCommand, SpawnRequest)
 from cone_feeder_sim.formats.cdr import encode
 from cone_feeder_sim.formats.pointcloud import EXIT_DTYPE
+from cone_feeder_sim.formats.run_recorder import RunRecorder
 from cone_feeder_sim.formats.runlog import (
     END_METADATA_NAME, engine_config_json, engine_input_from_event, event_text, expand_record_path,
-    input_event, METADATA_NAME, parameter_text, RunRecorder)
+    input_event, METADATA_NAME, parameter_text)
 from cone_feeder_sim.formats.topics import RUNNER_TOPICS, TOPICS
 from cone_feeder_sim.physics.params import ProductParams
 import mcap.exceptions
@@ -119,7 +120,8 @@ def test_engine_config_json_is_complete() -> None:
     assert data['model']['channels'] == {'count': 14, 'boundary': 108.0,
                                          'numbering': 'clockwise'}
     assert data['initial_pieces'][0]['position'] == [0.1, 0.0, 0.03]
-    assert set(data) == {'model', 'solver', 'dt', 'drive', 'feed', 'initial_pieces', 'seed'}
+    assert set(data) == {'model', 'solver', 'dt', 'drive', 'feed', 'initial_pieces', 'seed',
+                         'spawn_max_height'}
 
 
 def test_expand_record_path(tmp_path: Path) -> None:
@@ -129,10 +131,11 @@ def test_expand_record_path(tmp_path: Path) -> None:
     assert first == tmp_path / 'runs' / 'sim_node_20261122T101500.mcap'
     first.parent.mkdir()
     first.write_bytes(b'')
-    assert expand_record_path(template, now).name == 'sim_node_20261122T101500_2.mcap'
+    # -2, not _2: <stem>_2.mcap is the second file of a split run
+    assert expand_record_path(template, now).name == 'sim_node_20261122T101500-2.mcap'
     fixed = tmp_path / 'fixed.mcap'
     fixed.write_bytes(b'')
-    assert expand_record_path(str(fixed), now) == fixed  # an explicit name is kept
+    assert expand_record_path(str(fixed), now) == fixed  # kept (the recorder refuses it)
 
 
 def stream_messages(path: Path) -> list[Message]:
@@ -165,7 +168,7 @@ def test_run_recorder_loses_nothing_when_the_writer_falls_behind(tmp_path: Path)
         meta = {m.name: dict(m.metadata) for m in
                 mcap.reader.make_reader(stream).iter_metadata()}
     assert meta[METADATA_NAME] == {'k': 'v'}
-    assert meta[END_METADATA_NAME] == {'note': 'done', 'messages': '3000'}
+    assert meta[END_METADATA_NAME] == {'note': 'done', 'messages': '3000', 'parts': '1'}
 
 
 def test_run_recorder_flushes_while_idle(tmp_path: Path) -> None:
@@ -267,7 +270,8 @@ SIGNAL_SCRIPT = """
 import json, signal, sys, threading, time
 from cone_feeder_sim.formats.cdr import encode
 from cone_feeder_sim.formats.topics import TOPICS
-from cone_feeder_sim.formats.runlog import METADATA_NAME, RunRecorder
+from cone_feeder_sim.formats.run_recorder import RunRecorder
+from cone_feeder_sim.formats.runlog import METADATA_NAME
 
 class Interrupt(Exception):
     pass
