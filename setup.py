@@ -28,6 +28,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
     # The ROS 2 Python packages (rclpy, message packages) come from the ROS installation
     # (apt) or from the PyPI ros-jazzy-* wheels; they are deliberately not listed here.

@@ -19,22 +19,31 @@ The command line: `cone-feeder-sim run`, `report` and `recover`.
 `cone-feeder-sim report RUN.mcap --out REPORT.png` draws the report of a recorded run;
 `cone-feeder-sim recover IN.mcap OUT.mcap` makes a complete file of an unfinished one.
 
-Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors.
+`run` appends every exit to the CSV as its output interval ends (flushed). SIGINT (Ctrl-C)
+or SIGTERM ends it cleanly after the current interval: the CSV keeps the exits so far, the
+MCAP file is closed complete, and one line says where the run stopped.
+
+Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors; 130 (SIGINT) or
+143 (SIGTERM), i.e. 128 + the signal number as a shell reports it, for an interrupted run.
 """
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+import contextlib
 import os
 from pathlib import Path
+import signal
 import sys
+import threading
 import time
-from typing import TextIO
+from types import FrameType, TracebackType
+from typing import Any, Self, TextIO
 
 from . import __version__
 from .errors import ConeFeederError
 from .feeder.runner import run_scenario
 from .feeder.scenario import Scenario
-from .formats.events_csv import write_events_csv
+from .formats.events_csv import EventsCsvWriter
 from .formats.mcap_reader import recover_mcap
 from .formats.runlog import ScenarioRecorder
 from .formats.scenario_file import load_scenario
@@ -53,6 +62,7 @@ class ProgressBar:
         self.exits = 0
         self.last_draw = 0.0
         self.last_decile = -1
+        self.pending = False  # a redrawn line without its newline
         self.start = time.monotonic()
 
     def __call__(self, t: float, sim: Simulator, step: StepResult) -> None:
@@ -72,9 +82,64 @@ class ProgressBar:
                 f't={t:.3f}/{self.total:.3f} s pieces={sim.state.count} exits={self.exits} '
                 f'wall={now - self.start:.1f} s')
         self.stream.write(('\r' + line) if self.tty else (line + '\n'))
+        self.pending = self.tty
         if self.tty and frac >= 1.0:
-            self.stream.write('\n')
+            self.end()
         self.stream.flush()
+
+    def end(self) -> None:
+        """End the line of a bar redrawn in place, so that what follows starts a new one."""
+        if self.pending:
+            self.stream.write('\n')
+            self.stream.flush()
+            self.pending = False
+
+
+#: Signals that end a headless run cleanly; its exit code is then 128 + the signal number.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+SignalHandler = Callable[[int, FrameType | None], Any] | int | None
+
+
+class StopOnSignals:
+    """
+    While active, SIGINT and SIGTERM only note that the run is to stop (no KeyboardInterrupt).
+
+    The runner calls the object between intervals (its stop predicate); ``signum`` is the
+    first signal received, None if none; later ones change nothing. The previous handlers
+    come back at the end of the with block. A signal ignored on entry (as a shell script
+    leaves SIGINT for a command it runs with ``&``) stays ignored. Outside the main thread,
+    where Python cannot install signal handlers, it installs none.
+    """
+
+    def __init__(self, signals: Sequence[signal.Signals] = STOP_SIGNALS) -> None:
+        """Prepare to catch `signals`."""
+        self.signals = tuple(signals)
+        self.signum: int | None = None
+        self._previous: dict[int, SignalHandler] = {}
+
+    def __enter__(self) -> Self:
+        """Install the handlers."""
+        if threading.current_thread() is threading.main_thread():
+            for signum in self.signals:
+                if signal.getsignal(signum) != signal.SIG_IGN:
+                    self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        """Restore the previous handlers (the default one where Python had none)."""
+        for signum, handler in self._previous.items():
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+        self._previous.clear()
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        if self.signum is None:
+            self.signum = signum
+
+    def __call__(self) -> bool:
+        """Tell whether a signal asked the run to stop."""
+        return self.signum is not None
 
 
 def check_writable(path: str, what: str = 'events') -> None:
@@ -118,27 +183,36 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
-    """Run a scenario; return the exit code."""
+    """Run a scenario, writing exits as they happen; return the exit code."""
     scenario: Scenario = load_scenario(args.scenario)
     check_writable(args.events)
     bar = None if args.quiet else ProgressBar(scenario.duration, err)
-    recorder = ScenarioRecorder(args.mcap, scenario, args.scenario) if args.mcap else None
-    try:
+    with StopOnSignals() as stop, contextlib.ExitStack() as outputs:
+        recorder = outputs.enter_context(contextlib.closing(
+            ScenarioRecorder(args.mcap, scenario, args.scenario))) if args.mcap else None
+        events = outputs.enter_context(EventsCsvWriter(args.events))
         callbacks = [c for c in (recorder, bar) if c is not None]
 
         def progress(t: float, sim: Simulator, step: StepResult) -> None:
+            events.write(step.exits)
             for callback in callbacks:
                 callback(t, sim, step)
 
-        result = run_scenario(scenario, progress if callbacks else None)
-    finally:
-        if recorder is not None:
-            recorder.close()
-    rows = write_events_csv(args.events, result.exit_table())
+        try:
+            result = run_scenario(scenario, progress, stop=stop)
+        finally:
+            if bar is not None:
+                bar.end()
     for failure in result.failures:
         err.write(f'warning: particle {failure.particle_id} removed at t={failure.t:.6f} s: '
                   f'{failure.reason}\n')
-    err.write(f'{rows} of {len(scenario.particles)} pieces left the cone; '
+    recorded = f', run recorded to {args.mcap}' if recorder is not None else ''
+    if result.stopped and stop.signum is not None:
+        err.write(f'interrupted by {signal.Signals(stop.signum).name} at '
+                  f't = {result.end_time:.3f} s: {events.rows} exits written to '
+                  f'{args.events}{recorded}\n')
+        return 128 + stop.signum
+    err.write(f'{events.rows} of {len(scenario.particles)} pieces left the cone; '
               f'{result.remaining_ids.size} still on it, {len(result.failures)} failed; '
               f'events written to {args.events}\n')
     if recorder is not None:
@@ -194,6 +268,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConeFeederError as exc:
         sys.stderr.write(f'error: {exc}\n')
         return 2
+    except KeyboardInterrupt:  # Ctrl-C outside a run's intervals (loading, report, recover)
+        sys.stderr.write('interrupted\n')
+        return 128 + signal.SIGINT
     return 1
 
 

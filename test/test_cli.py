@@ -17,13 +17,17 @@
 import contextlib
 import csv
 import io
+import os
 from pathlib import Path
+import signal
 
-from cone_feeder_sim.cli import main, ProgressBar
+from cone_feeder_sim import cli
+from cone_feeder_sim.cli import main, ProgressBar, StopOnSignals
 from cone_feeder_sim.feeder.runner import run_scenario
-from cone_feeder_sim.formats.events_csv import EVENT_COLUMNS
+from cone_feeder_sim.formats.events_csv import EVENT_COLUMNS, EventsCsvWriter
 from cone_feeder_sim.formats.mcap_writer import McapRecorder
 from cone_feeder_sim.formats.scenario_file import scenario_from_mapping
+from cone_feeder_sim.physics.simulation import ExitEvents
 import mcap.reader
 import numpy as np
 import pytest
@@ -89,6 +93,93 @@ def test_runner_matches_the_simulator_and_stops_when_empty() -> None:
     assert table['ids'].tolist() == [0]
     assert seen[-1] < 10.0  # stopped once the only piece had left
     assert result.accepted_steps > 0 and result.remaining_ids.size == 0
+
+
+def test_runner_stops_between_intervals_when_asked() -> None:
+    sc = scenario_from_mapping({'duration': 10.0, 'rotation': [[0.0, 0.0], [0.4, -10.47]],
+                                'output_interval': 0.05,
+                                'particles': [{'position': [0.11, -0.01, 0.03]}]})
+    seen: list[float] = []
+    result = run_scenario(sc, lambda t, sim, step: seen.append(t), stop=lambda: len(seen) == 3)
+    assert result.stopped and len(seen) == 3
+    assert result.end_time == pytest.approx(0.15) == seen[-1]
+    assert result.remaining_ids.tolist() == [0]
+    done = run_scenario(sc, stop=lambda: False)
+    assert not done.stopped and done.end_time < 10.0 and done.remaining_ids.size == 0
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_signal_ends_the_run_after_the_interval(
+        tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch,
+        signum: signal.Signals) -> None:
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text(SCENARIO)
+    events = tmp_path / 'events.csv'
+    run_mcap = tmp_path / 'run.mcap'
+
+    class SignalAfterFirstExit(EventsCsvWriter):
+
+        def write(self, exits: ExitEvents) -> int:
+            count = super().write(exits)
+            if count:
+                os.kill(os.getpid(), signum)  # handled at once, in this thread
+            return count
+
+    monkeypatch.setattr(cli, 'EventsCsvWriter', SignalAfterFirstExit)
+    before = signal.getsignal(signum)
+    code = main(['run', str(scenario), '--events', str(events), '--mcap', str(run_mcap),
+                 '--quiet'])
+    assert code == 128 + signum
+    assert signal.getsignal(signum) == before  # restored
+    err = capsys.readouterr().err
+    assert f'interrupted by {signum.name} at t = ' in err
+    with events.open() as stream:
+        rows = list(csv.DictReader(stream))
+    assert len(rows) == 1 and int(rows[0]['particle']) == 1  # piece 0 leaves later
+    assert f': 1 exits written to {events}, run recorded to {run_mcap}' in err
+    t_end = float(err.split('at t = ')[1].split()[0])
+    assert float(rows[0]['t']) <= t_end < 3.0
+    with run_mcap.open('rb') as stream:
+        reader = mcap.reader.make_reader(stream)
+        summary = reader.get_summary()
+        end = {m.name: dict(m.metadata) for m in reader.iter_metadata()}['cone_feeder_sim.end']
+    assert summary is not None and summary.statistics.message_count > 0
+    assert float(end['end_time']) == pytest.approx(t_end, abs=1e-3)
+
+
+def test_stop_on_signals_leaves_an_ignored_signal_ignored() -> None:
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with StopOnSignals() as stop:
+            assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+            assert signal.getsignal(signal.SIGTERM) == stop._handle
+        assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+        assert not stop()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def test_progress_bar_on_a_terminal_ends_its_line() -> None:
+    class Terminal(io.StringIO):
+
+        def isatty(self) -> bool:
+            return True
+
+    stream = Terminal()
+    bar = ProgressBar(1.0, stream)
+
+    class Step:
+        exits = ()
+
+    class Sim:
+        class state:  # noqa: N801 - mimics Simulator.state
+            count = 3
+
+    bar(0.5, Sim(), Step())  # type: ignore[arg-type]
+    assert stream.getvalue().startswith('\r[') and not stream.getvalue().endswith('\n')
+    bar.end()
+    bar.end()
+    assert stream.getvalue().endswith('\n') and stream.getvalue().count('\n') == 1  # once
 
 
 def test_progress_bar_on_a_pipe_prints_every_tenth() -> None:

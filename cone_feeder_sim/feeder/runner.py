@@ -17,7 +17,9 @@ Running a scenario headless: the loop over output intervals, with progress callb
 
 The loop is shared by the command line and the tests. It advances a
 :class:`~cone_feeder_sim.physics.simulation.Simulator` interval by interval (output_interval of the
-scenario), collects the exit events and failures, and reports progress.
+scenario), collects the exit events and failures, and reports every finished interval to the
+progress callback (its exits included, so that they can be written as they happen). A stop
+predicate, asked before every interval, ends the run early between two intervals.
 """
 
 from collections.abc import Callable
@@ -31,13 +33,20 @@ from ..physics.simulation import ExitEvents, Failure, SimParams, Simulator, Step
 
 @dataclass
 class RunResult:
-    """Everything a run produced: exits (one row per piece that left), failures, stats."""
+    """
+    Everything a run produced: exits (one row per piece that left), failures, stats.
+
+    end_time (s) is the simulation time the run reached; stopped is True when the stop
+    predicate ended it before the scenario's end.
+    """
 
     exits: list[ExitEvents] = field(default_factory=list)
     failures: list[Failure] = field(default_factory=list)
     accepted_steps: int = 0
     rejected_steps: int = 0
     remaining_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    end_time: float = 0.0
+    stopped: bool = False
 
     def exit_table(self) -> dict[str, np.ndarray]:
         """Return all exits as columns (ids, t, angle_deg, channel, position, velocity, mass)."""
@@ -54,12 +63,16 @@ class RunResult:
 Progress = Callable[[float, Simulator, StepResult], None]
 
 
-def run_scenario(scenario: Scenario, progress: Progress | None = None) -> RunResult:
+def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
+                 stop: Callable[[], bool] | None = None) -> RunResult:
     """
-    Run a validated scenario to its end (or until every piece has left).
+    Run a validated scenario to its end (or until every piece has left, or stop() says so).
 
     Particle ids are the 0-based indices of the pieces in the scenario. progress, if given,
-    is called after every output interval with the simulated time.
+    is called after every output interval with the simulated time at its end, the simulator
+    and the interval's StepResult (its exits and failures). stop, if given, is asked before
+    every interval; when it returns True the run ends there (result.stopped), so an
+    interval is never cut short.
     """
     sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
     for spec in scenario.particles:
@@ -68,6 +81,9 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None) -> RunRes
     result = RunResult()
     k = 0
     while sim.t < scenario.duration and sim.state.count:
+        if stop is not None and stop():
+            result.stopped = True
+            break
         k += 1
         t1 = min(scenario.duration, k * scenario.output_interval)
         step = sim.advance_to(t1)
@@ -79,4 +95,5 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None) -> RunRes
         if progress is not None:
             progress(t1, sim, step)
     result.remaining_ids = sim.state.ids.copy()
+    result.end_time = sim.t
     return result

@@ -12,41 +12,95 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Writing exit events to CSV: one row per piece that left the cone."""
+"""
+Writing exit events to CSV: one row per piece that left the cone, appended as they happen.
 
-from collections.abc import Mapping
+The file has a header row (:data:`EVENT_COLUMNS`) and one row per exit: ``particle`` (the
+particle id; the headless runner's ids are the 0-based indices in the scenario), ``t`` (s),
+``angle_deg`` ([0, 360)), ``channel`` (1-based), ``x``, ``y``, ``z`` (m), ``vx``, ``vy``,
+``vz`` (m/s), ``mass`` (kg); floats as ``repr`` writes them (exact round trip). Rows are in
+exit-time order when the exits are given interval by interval.
+"""
+
+from collections.abc import Iterable
 import csv
+import io
 from pathlib import Path
+from types import TracebackType
+from typing import Any, Self, TextIO
 
 import numpy as np
 
 from ..errors import ConeFeederError
+from ..physics.simulation import ExitEvents
 
 EVENT_COLUMNS = ('particle', 't', 'angle_deg', 'channel', 'x', 'y', 'z', 'vx', 'vy', 'vz',
                  'mass')
 
 
-def write_events_csv(path: str | Path, table: Mapping[str, np.ndarray]) -> int:
+class EventsCsvWriter:
     """
-    Write exits to CSV with a header row; return the number of rows.
+    An events CSV written as the run goes: the header at open, rows appended by :meth:`write`.
 
-    table: columns as returned by RunResult.exit_table(): ids (M,), t (M,) s, angle_deg (M,)
-    in [0, 360), channel (M,), position (M, 3) m, velocity (M, 3) m/s, mass (M,) kg.
-    Rows are sorted by exit time.
+    Every write ends with a flush, so the rows of the finished intervals are in the file
+    whatever ends the process afterwards. ``with EventsCsvWriter(path) as events:`` closes it.
     """
-    order = np.argsort(table['t'], kind='stable')
-    path = Path(path)
-    try:
-        with path.open('w', newline='', encoding='utf-8') as stream:
-            writer = csv.writer(stream)
-            writer.writerow(EVENT_COLUMNS)
-            for i in order:
-                pos = table['position'][i]
-                vel = table['velocity'][i]
-                writer.writerow([int(table['ids'][i]), repr(float(table['t'][i])),
-                                 repr(float(table['angle_deg'][i])), int(table['channel'][i]),
-                                 *(repr(float(v)) for v in pos), *(repr(float(v)) for v in vel),
-                                 repr(float(table['mass'][i]))])
-    except OSError as exc:
-        raise ConeFeederError(f'cannot write events to {path}: {exc.strerror or exc}') from exc
-    return int(order.shape[0])
+
+    def __init__(self, path: str | Path) -> None:
+        """Create (or truncate) the file and write the header row."""
+        self.path = Path(path)
+        self.rows = 0
+        try:
+            self._stream: TextIO = self.path.open('w', newline='', encoding='utf-8')
+        except OSError as exc:
+            raise self._error(exc) from exc
+        self._append([EVENT_COLUMNS])
+
+    def __enter__(self) -> Self:
+        """Return the writer (closed at the end of the with block)."""
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        """Close the file."""
+        self.close()
+
+    @property
+    def closed(self) -> bool:
+        """Tell whether the file is closed."""
+        return self._stream.closed
+
+    def write(self, exits: ExitEvents) -> int:
+        """Append one row per exit, in exit-time order, and flush; return the rows written."""
+        order = np.argsort(exits.t, kind='stable')
+        self._append([int(exits.ids[i]), repr(float(exits.t[i])),
+                      repr(float(exits.angle_deg[i])), int(exits.channel[i]),
+                      *(repr(float(v)) for v in exits.position[i]),
+                      *(repr(float(v)) for v in exits.velocity[i]),
+                      repr(float(exits.mass[i]))] for i in order)
+        self.rows += int(order.shape[0])
+        return int(order.shape[0])
+
+    def close(self) -> None:
+        """Close the file; idempotent."""
+        if self._stream.closed:
+            return
+        try:
+            self._stream.close()
+        except OSError as exc:
+            raise self._error(exc) from exc
+
+    def _append(self, rows: Iterable[Iterable[Any]]) -> None:
+        """Format rows completely first, then write them with one call and flush."""
+        text = io.StringIO(newline='')
+        csv.writer(text).writerows(rows)
+        if not text.tell():
+            return
+        try:
+            self._stream.write(text.getvalue())
+            self._stream.flush()
+        except OSError as exc:
+            raise self._error(exc) from exc
+
+    def _error(self, exc: OSError) -> ConeFeederError:
+        return ConeFeederError(f'cannot write events to {self.path}: {exc.strerror or exc}')

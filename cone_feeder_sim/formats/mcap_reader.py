@@ -56,6 +56,7 @@ __all__ = [
     'Recording',
     'RecordStream',
     'open_recording',
+    'parse_run_source',
     'recover_mcap',
     'run_parts',
     'RunSource',
@@ -353,6 +354,12 @@ def _open_file(path: Path) -> Recording:
         raise RecordingError(f'{str(path)!r} is not an MCAP file (wrong magic bytes)')
     recording = _read_complete(path)
     return recording if recording is not None else _scan(path)
+
+
+def parse_run_source(text: str) -> RunSource:
+    """Return the recording a text names (a ROS parameter): ``a.mcap,b.mcap`` is a list."""
+    parts = [part.strip() for part in text.split(',') if part.strip()]
+    return parts if len(parts) > 1 else text.strip()
 
 
 def run_parts(source: RunSource) -> list[Path]:

@@ -137,7 +137,6 @@ class RunRecorder:
             raise RecordingError(f'{str(taken[0])!r} exists: a recording never overwrites a '
                                  'file (choose another record_path or move the old run)')
         self._limits = limits
-        self._check_space()
         self._topics = list(topics)
         self._metadata = {name: dict(data) for name, data in metadata.items()}
         self._options = {'flush_interval_s': flush_interval_s, 'compression': compression,
@@ -146,6 +145,12 @@ class RunRecorder:
         self._paths: list[Path] = []
         self._file_start_ns: int | None = None
         self._recorder = self._open_part()
+        try:
+            self._check_space()
+        except RecordingError:
+            _close_quietly(self._recorder)
+            self._first.unlink(missing_ok=True)  # the file just made, holding no message
+            raise
         # The caller's thread takes no lock that the writer thread needs: the only channel
         # is a SimpleQueue (put is atomic and safe to interrupt), and each byte counter has
         # one writer. A signal (SIGINT, SIGTERM) raised in the caller's thread while it held

@@ -70,6 +70,9 @@ NODE_LIMITS: dict[str, Limit] = {
     'real_time_factor': Limit(0.0, 100.0, ''),
     'markers.rate': Limit(0.0, 1000.0, '1/s'),
     'diagnostics.period': Limit(0.05, 3600.0, 's'),
+    'record_max_file_size': Limit(0, 2 ** 62, 'bytes'),
+    'record_max_file_duration': Limit(0.0, 1.0e9, 's'),
+    'record_min_free_space': Limit(0, 2 ** 62, 'bytes'),
 }
 
 
@@ -93,7 +96,8 @@ DEFAULT_D_VALUES = (30.0, 135.0, 225.0, 750.0)
 #: Parameters that re-simulation does not take from the recording (wall-clock pacing,
 #: start state of the timer, the outputs of this run).
 LIVE_PARAMETERS = ('real_time_factor', 'start_paused', 'diagnostics.period', 'record_path',
-                   'record_compression', 'replay_commands')
+                   'record_compression', 'record_max_file_size', 'record_max_file_duration',
+                   'record_min_free_space', 'replay_commands')
 #: Run-time parameters that change what the simulation does (refused while re-simulating).
 RUN_PARAMETERS = ('max_angular_velocity', 'max_angular_acceleration', 'cmd_timeout',
                   'open_loop_pattern', 'markers.rate')
@@ -304,6 +308,17 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
         ParamSpec('record_compression', 'zstd', 'chunk compression of the recording: zstd '
                   '(smallest files), lz4 (least CPU) or none',
                   constraints=' | '.join(COMPRESSIONS)),
+        ParamSpec('record_max_file_size', 0, 'the recording goes on in a new file '
+                  '(<stem>_2.mcap, ...) before one passes this many bytes; 0 = no limit',
+                  limit=NODE_LIMITS['record_max_file_size']),
+        ParamSpec('record_max_file_duration', 600.0, 'the recording goes on in a new file '
+                  'when one holds this many seconds of simulated time (about 100 MB on the '
+                  'default scene); 0 = no limit',
+                  limit=NODE_LIMITS['record_max_file_duration']),
+        ParamSpec('record_min_free_space', 500_000_000, 'the recording stops, its file '
+                  'closed, when less than this many bytes are free on its device; the '
+                  'simulation goes on; 0 = no guard',
+                  limit=NODE_LIMITS['record_min_free_space']),
         ParamSpec('replay_commands', '', 'MCAP file of an earlier sim_node run to re-simulate: '
                   'its parameters, initial state and applied inputs (at the same ticks) drive '
                   'this run, live inputs are refused until its last tick, then the node '

@@ -61,7 +61,8 @@ from .guarded_node import GuardedNode
 from .parameters import declare, init_or_exit, ParamSpec, warn_unknown_parameters
 from .qos import rclpy_qos
 from ..errors import ConeFeederError, ParameterError
-from ..formats.mcap_reader import open_recording, RecordedMessage, Recording
+from ..formats.mcap_reader import (
+    open_recording, parse_run_source, RecordedMessage, Recording, SplitRecording)
 from ..formats.runlog import METADATA_NAME
 from ..formats.topics import qos_from_yaml, TOPICS
 from ..physics.params import Limit
@@ -137,7 +138,7 @@ class ReplayNode(GuardedNode):
             raise ParameterError(f'stop_offset = {stop_offset:g} s must be after start_offset '
                                  f'= {start_offset:g} s (or 0: to the end)')
 
-        recording = open_recording(path)
+        recording = open_recording(parse_run_source(path))
         self._recording = recording
         log = self.get_logger()
         if not recording.complete:
@@ -197,8 +198,8 @@ class ReplayNode(GuardedNode):
                  f'time from offset {start_offset:g} s at rate {self._rate:g}'
                  + (', looped' if self._loop else ''))
 
-    def _select(self, recording: Recording, wanted: list[str], include_inputs: bool,
-                publish_clock: bool) -> set[str]:
+    def _select(self, recording: Recording | SplitRecording, wanted: list[str],
+                include_inputs: bool, publish_clock: bool) -> set[str]:
         """Return the topics to replay."""
         inputs: set[str] = set()
         meta = recording.metadata.get(METADATA_NAME, {})

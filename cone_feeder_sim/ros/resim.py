@@ -22,13 +22,13 @@ recorded inputs at the same ticks, which reproduces the run exactly.
 
 from dataclasses import dataclass
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 from ..errors import RecordingError
 from ..formats.cdr import CdrError, default_codec
-from ..formats.mcap_reader import open_recording, RecordedMessage
+from ..formats.mcap_reader import (
+    open_recording, parse_run_source, RecordedMessage, RunSource)
 from ..formats.runlog import END_METADATA_NAME, FORMAT_VERSION, METADATA_NAME
 
 __all__ = ['ResimPlan', 'load_resim_plan']
@@ -53,9 +53,16 @@ class ResimPlan:
     problem: str | None
 
 
-def load_resim_plan(path: str | os.PathLike) -> ResimPlan:
-    """Read a sim_node recording for re-simulation; raise RecordingError if it cannot be."""
-    recording = open_recording(path)
+def load_resim_plan(source: RunSource) -> ResimPlan:
+    """
+    Read a sim_node recording for re-simulation; raise RecordingError if it cannot be.
+
+    ``source``: the first file of the run (its split parts come along), a directory, a list
+    of files, or a text of comma-separated files.
+    """
+    if isinstance(source, str):
+        source = parse_run_source(source)
+    recording = open_recording(source)
     meta = recording.metadata.get(METADATA_NAME)
     where = str(recording.path)
     if meta is None or 'parameters_json' not in meta:

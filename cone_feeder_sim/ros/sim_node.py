@@ -96,6 +96,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 import datetime
 import json
+import math
 import os
 from pathlib import Path
 import signal
@@ -133,7 +134,7 @@ from ..formats.messages import (
     channel_mass_message, clock_message, cone_state_message, exits_message, header, MarkerBuilder,
     MarkerSchedule, particles_message, pose_array_positions, stamp, stamp_ns, states_message)
 from ..formats.parameter_file import load_model_params
-from ..formats.run_recorder import RunRecorder
+from ..formats.run_recorder import RecordingLimits, RunRecorder
 from ..formats.runlog import (
     engine_config_json, engine_input_from_event, event_text, expand_record_path, failure_event,
     FORMAT_VERSION, input_event, INPUT_EVENTS, METADATA_NAME, parameter_text, to_jsonable)
@@ -203,6 +204,8 @@ class SimNode(GuardedNode):
         self._topics: dict[str, TopicInfo] = {}
         self._topic_names: dict[str, str] = {}
         self._recorder: RunRecorder | None = None
+        self._recording_error: str | None = None
+        self._refusal_logged: dict[tuple[str, str], float] = {}
         self._resim: ResimPlan | None = None
         self._resim_active = False
         specs = {s.name: s for s in parameter_specs()}
@@ -305,8 +308,12 @@ class SimNode(GuardedNode):
         if compression not in COMPRESSIONS:
             raise ParameterError(f'record_compression must be one of {", ".join(COMPRESSIONS)}, '
                                  f'got {compression!r}')
+        limits = RecordingLimits(
+            max_file_size=int(values['record_max_file_size']),
+            max_file_duration_ns=round(float(values['record_max_file_duration']) * 1e9),
+            min_free_bytes=int(values['record_min_free_space']))
         self._recorder = RunRecorder(path, topics, {METADATA_NAME: self._metadata(values)},
-                                     compression=compression)
+                                     limits=limits, compression=compression)
         self.add_message_hook(self._recorder.hook)
         self.get_logger().info(f'recording to {path}')
 
@@ -336,12 +343,12 @@ class SimNode(GuardedNode):
 
     def _on_flush_timer(self) -> None:
         recorder = self._recorder
-        if recorder is None:
+        if recorder is None or recorder.closed:
             return
         if recorder.error is not None:
-            self.get_logger().error(
-                f'recording to {recorder.path} stopped: {recorder.error}',
-                throttle_duration_sec=60.0)
+            self._recording_error = str(recorder.error)
+            self.close_recording()  # the simulation goes on without it
+            return
         recorder.maybe_flush()
 
     def close_recording(self) -> None:
@@ -355,12 +362,13 @@ class SimNode(GuardedNode):
             'ticks': str(self._engine.tick_index), 'end_time': repr(self._engine.t),
             'exits': str(self._total_exits), 'failures': str(self._total_failures),
             'refused_inputs': str(self._refused)})
+        files = ', '.join(str(p) for p in recorder.paths) or str(recorder.path)
         if recorder.error is not None:
-            self._final_log('error', f'recording {recorder.path} is incomplete: '
-                            f'{recorder.error}')
+            self._recording_error = str(recorder.error)
+            self._final_log('error', f'recording stopped: {recorder.error}; '
+                            f'{recorder.message_count} messages are in {files}')
         else:
-            self._final_log('info', f'recorded {recorder.message_count} messages to '
-                            f'{recorder.path}')
+            self._final_log('info', f'recorded {recorder.message_count} messages to {files}')
 
     def _final_log(self, level: str, text: str) -> None:
         """Log at shutdown: after a signal the context is gone and /rosout with it."""
@@ -439,8 +447,12 @@ class SimNode(GuardedNode):
         (``text``, default ``<what> refused: <reason>``) is throttled.
         """
         self._refused += count
-        self.get_logger().warning(text or f'{what} refused: {reason}',
-                                  throttle_duration_sec=1.0)
+        # at most one line a second per kind of refusal (rclpy throttles per call site)
+        key = (what, reason.split(':')[0][:40])
+        now = time.monotonic()
+        if now - self._refusal_logged.get(key, -math.inf) >= 1.0:
+            self._refusal_logged[key] = now
+            self.get_logger().warning(text or f'{what} refused: {reason}')
         self._node_event('refused', input=what, count=count, reason=reason)
 
     # ------------------------------------------------------------------ plumbing
@@ -752,6 +764,24 @@ class SimNode(GuardedNode):
 
     # ------------------------------------------------------------------ diagnostics
 
+    def _recording_status(self) -> dict[str, Any]:
+        """Return the diagnostic status of the recording: OK, off, or ERROR once it stopped."""
+        recorder = self._recorder
+        values = {}
+        if self._recording_error is not None:
+            level, message = 2, f'recording stopped: {self._recording_error}'
+        elif recorder is None:
+            level, message = 0, 'not recording'
+        else:
+            level, message = 0, f'recording to {recorder.paths[-1]}'
+        if recorder is not None:
+            values = {'files': str(len(recorder.paths)),
+                      'messages written': str(recorder.message_count),
+                      'first file': str(recorder.path)}
+        return {'level': level, 'name': f'{self.get_fully_qualified_name()}: recording',
+                'message': message, 'hardware_id': 'cone_feeder',
+                'values': [{'key': k, 'value': v} for k, v in values.items()]}
+
     def _publish_diagnostics(self) -> None:
         now = time.perf_counter()
         window = self._window
@@ -802,7 +832,8 @@ class SimNode(GuardedNode):
             'status': [{'level': level,
                         'name': f'{self.get_fully_qualified_name()}: simulation',
                         'message': message, 'hardware_id': 'cone_feeder',
-                        'values': [{'key': k, 'value': v} for k, v in values.items()]}]}
+                        'values': [{'key': k, 'value': v} for k, v in values.items()]},
+                       self._recording_status()]}
         self._publish(self._pub_diag, message_dict, self._now_ns())
         if not self._paused:
             self._window = _Window(now, self._engine.t)
@@ -839,6 +870,9 @@ def main(args: list[str] | None = None) -> int:
                 node.destroy_node()
             rclpy.try_shutdown()
         finally:
+            # a second Ctrl-C that arrived meanwhile is dropped, not raised on unblocking
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
             signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     return status
 

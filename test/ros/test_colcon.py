@@ -18,7 +18,9 @@ The package as a ROS 2 workspace sees it: colcon build, ament index, `ros2 run` 
 The source is copied to a temporary workspace (so no build/, install/ or log/ lands in the
 repository), built with colcon, and the install space is sourced with its setup.bash. The
 executables are then found exactly as `ros2 run cone_feeder_sim sim_node` finds them:
-ament_index_python.get_package_prefix(), then <prefix>/lib/cone_feeder_sim/<executable>.
+ament_index_python.get_package_prefix(), then <prefix>/lib/cone_feeder_sim/<executable>; the
+config files and the launch file (`ros2 launch cone_feeder_sim sim.launch.py`) in its share
+directory.
 The installed node is started with the installed config and driven over ROS 2; the example
 controller runs beside it. The first start compiles the numba kernels of the new install
 (about 30 s on a free core).
@@ -102,6 +104,10 @@ def test_ros2_run_lookup_finds_and_runs_the_installed_node(
     share = Path(get_package_share_directory(PACKAGE))
     config = share / 'config' / 'sim_node.yaml'
     assert config.is_file() and (share / 'config' / 'table2.yaml').is_file()
+    # `ros2 launch cone_feeder_sim sim.launch.py` finds the launch file here
+    launch_file = share / 'launch' / 'sim.launch.py'
+    assert launch_file.is_file()
+    assert launch_file.read_bytes() == (ROOT / 'launch' / 'sim.launch.py').read_bytes()
     # the installed package is the one imported, not the source tree
     where = subprocess.run([sys.executable, '-c', 'import cone_feeder_sim; '
                             'print(cone_feeder_sim.__file__)'], env=env, cwd=tmp_path,
