@@ -42,7 +42,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from .mcap_writer import _open_for_writing, LIBRARY
-from .run_recorder import part_path, PART_METADATA_NAME
+from .run_recorder import PART_METADATA_NAME, part_path
 from ..errors import RecordingError
 
 try:  # zstandard is optional for mcap; only needed to recognise its errors here.
