@@ -27,9 +27,11 @@ from pathlib import Path
 from typing import Any
 
 from cone_feeder_sim.errors import RecordingError
+from cone_feeder_sim.formats.mcap_reader import open_recording
 from cone_feeder_sim.formats.runlog import END_METADATA_NAME, INPUT_EVENTS, METADATA_NAME
 from cone_feeder_sim.ros.parameters import parameter_specs
 from cone_feeder_sim.ros.sim_node import SimNode
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray
 import mcap.reader
 import numpy as np
@@ -342,3 +344,61 @@ def test_resimulation_reproduces_failed_pieces(tmp_path: Path) -> None:
     failed_b = [e for e in events(b, '/sim_node/events') if e['event'] == 'failure']
     assert failed_a and failed_a == failed_b
     assert {'id', 't', 'position', 'velocity', 'mass', 'reason'} <= set(failed_a[0])
+
+
+def test_a_split_run_is_read_by_rosbags_and_resimulated_exactly(tmp_path: Path) -> None:
+    original = tmp_path / 'split' / 'run.mcap'
+    again = tmp_path / 'again.mcap'
+    first = Ros()
+    try:
+        # 160 ticks of 20 ms in files of 0.7 s: 5 files
+        sim = first.sim(record_path=str(original), real_time_factor=0.0, start_paused=True,
+                        cmd_timeout=0.0, record_max_file_duration=0.7)
+        drive(first, sim, 160)
+        ticks = sim.engine.tick_index
+        sim.close_recording()
+        parts = sim._recorder.paths
+    finally:
+        first.close()
+    assert len(parts) >= 3
+    for part in parts:
+        bag = read_bag(part)  # each file on its own: complete and readable
+        assert bag['/particle_states'] and read_metadata(part)[METADATA_NAME]
+    second = Ros()
+    try:
+        sim = second.sim(replay_commands=str(tmp_path / 'split'), record_path=str(again),
+                         real_time_factor=0.0, record_max_file_duration=0.0)
+        assert second.spin_until(lambda: not sim.replaying, 120.0)
+        assert sim.engine.tick_index == ticks
+    finally:
+        second.close()
+    b = read_bag(again)
+    a: dict[str, list[tuple[int, Any]]] = {}
+    for part in parts:
+        for topic, messages in read_bag(part).items():
+            a.setdefault(topic, []).extend(messages)
+    for topic in ('/particle_states', '/exit_events', '/channel_mass', '/cone_state'):
+        assert [t for t, _ in a[topic]] == [t for t, _ in b[topic]], topic
+        for (_, ma), (_, mb) in zip(a[topic], b[topic]):
+            assert plain(ma) == plain(mb), topic
+    assert len(a['/particle_states']) == ticks
+
+
+def test_a_vanished_directory_stops_the_recording_not_the_simulation(
+        ros: Ros, tmp_path: Path) -> None:
+    folder = tmp_path / 'usb'
+    sim = ros.sim(record_path=str(folder / 'run.mcap'), real_time_factor=0.0,
+                  record_max_file_duration=0.2, **{'diagnostics.period': 0.1})
+    statuses: list[Any] = []
+    ros.client.create_subscription(DiagnosticArray, '/diagnostics',
+                                   lambda msg: statuses.extend(msg.status), 10)
+    assert ros.spin_until(lambda: len(sim._recorder.paths) >= 3, 60.0)
+    folder.rename(tmp_path / 'moved')
+    assert ros.spin_until(lambda: sim._recording_error is not None, 60.0)
+    ticks = sim.engine.tick_index
+    assert ros.spin_until(lambda: sim.engine.tick_index > ticks + 50, 60.0)  # goes on
+    assert ros.spin_until(lambda: any(
+        s.level == DiagnosticStatus.ERROR and s.name.endswith('recording') for s in statuses),
+        30.0)
+    recording = open_recording(tmp_path / 'moved' / 'run.mcap')
+    assert recording.message_count > 0

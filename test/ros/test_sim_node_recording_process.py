@@ -195,3 +195,24 @@ def test_unwritable_path_exits_with_an_error(tmp_path: Path) -> None:
     assert proc.returncode == 1
     output = proc.stdout + proc.stderr
     assert "cannot start: cannot open MCAP file '/proc/run.mcap' for writing" in output
+
+
+@pytest.mark.parametrize('record_path, reason', [
+    ('/dev/full', "'/dev/full' is not a regular file"),
+    ('/dev/full/run.mcap', 'cannot create the directory'),
+])
+def test_a_full_or_impossible_destination_is_one_line_and_status_1(
+        tmp_path: Path, record_path: str, reason: str) -> None:
+    env = dict(os.environ)
+    env['PYTHONPATH'] = os.pathsep.join([str(ROOT)] + (
+        [env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
+    env['ROS_DOMAIN_ID'] = str(random_domain())
+    proc = subprocess.run(
+        [sys.executable, '-m', 'cone_feeder_sim.ros.sim_node', '--ros-args', '-r',
+         f'__ns:=/full{random.randrange(1_000_000)}', '-p', f'record_path:={record_path}'],
+        env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1
+    output = proc.stdout + proc.stderr
+    assert 'Traceback' not in output
+    fatal = [line for line in output.splitlines() if '[FATAL]' in line]
+    assert len(fatal) == 1 and 'cannot start' in fatal[0] and reason in fatal[0]
