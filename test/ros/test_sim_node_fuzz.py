@@ -92,6 +92,7 @@ def test_the_node_survives_random_input(tmp_path: Path, seed: int) -> None:
         assert ros.spin_until(lambda: cmd.get_subscription_count() > 0
                               and spawn.get_subscription_count() > 0
                               and all(c.service_is_ready() for c in clients.values()), 30.0)
+
         def send(publisher: Any, callback: Callable[[bytes], None], data: bytes) -> None:
             try:
                 publisher.publish(data)
