@@ -308,12 +308,12 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
         ParamSpec('record_compression', 'zstd', 'chunk compression of the recording: zstd '
                   '(smallest files), lz4 (least CPU) or none',
                   constraints=' | '.join(COMPRESSIONS)),
-        ParamSpec('record_max_file_size', 0, 'the recording goes on in a new file '
+        ParamSpec('record_max_file_size', 100_000_000, 'the recording goes on in a new file '
                   '(<stem>_2.mcap, ...) before one passes this many bytes; 0 = no limit',
                   limit=NODE_LIMITS['record_max_file_size']),
-        ParamSpec('record_max_file_duration', 600.0, 'the recording goes on in a new file '
-                  'when one holds this many seconds of simulated time (about 100 MB on the '
-                  'default scene); 0 = no limit',
+        ParamSpec('record_max_file_duration', 360.0, 'the recording goes on in a new file '
+                  'when one holds this many seconds of simulated time (the first 360 s of the '
+                  'default scene are about 100 MB); 0 = no limit',
                   limit=NODE_LIMITS['record_max_file_duration']),
         ParamSpec('record_min_free_space', 500_000_000, 'the recording stops, its file '
                   'closed, when less than this many bytes are free on its device; the '
