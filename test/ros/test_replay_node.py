@@ -31,7 +31,10 @@ from typing import Any
 
 from cone_feeder_sim.cli import main as cli_main
 from cone_feeder_sim.errors import ConeFeederError
+from cone_feeder_sim.formats.cdr import encode
 from cone_feeder_sim.formats.mcap_writer import McapRecorder
+from cone_feeder_sim.formats.run_recorder import RecordingLimits, RunRecorder
+from cone_feeder_sim.formats.topics import QosProfile
 from cone_feeder_sim.ros.replay_node import ReplayNode
 from diagnostic_msgs.msg import DiagnosticArray
 import mcap.reader
@@ -232,3 +235,25 @@ def test_process_exit_status_and_errors(tmp_path: Path) -> None:
     assert missing.returncode == 1 and 'parameter path is required' in missing.stderr
     late = run_replay(tmp_path, f'path:={good}', 'start_offset:=5.0')
     assert late.returncode == 1 and 'past the end of the recording' in late.stderr
+
+
+@pytest.mark.parametrize('how', ['first file', 'directory', 'list'])
+def test_a_split_run_is_replayed_whole(ros: Ros, tmp_path: Path, how: str) -> None:
+    folder = tmp_path / 'split'
+    recorder = RunRecorder(folder / 'run.mcap', [('/counter', 'std_msgs/msg/Float64',
+                                                  QosProfile(depth=100))],
+                           {'cone_feeder_sim': {}},
+                           limits=RecordingLimits(max_file_duration_ns=300_000_000))
+    for i in range(COUNT):
+        recorder.write('/counter', 'std_msgs/msg/Float64',
+                       encode('std_msgs/msg/Float64', {'data': float(i)}),
+                       FIRST_NS + i * STEP_NS)
+    recorder.close(end_metadata={})
+    assert len(recorder.paths) >= 3
+    source = {'first file': str(recorder.path), 'directory': str(folder),
+              'list': ','.join(str(p) for p in recorder.paths)}[how]
+    counter = ros.listen(Float64, '/counter')
+    node = ros.replay(path=source, rate=4.0, delay=0.5)
+    assert ros.spin_until(lambda: node.done.done(), 30.0)
+    ros.spin_until(lambda: len(counter) == COUNT, 5.0)
+    assert values(counter) == [float(i) for i in range(COUNT)]
