@@ -34,19 +34,11 @@ import sys
 import timeit
 from typing import Any
 
+from calibration import calibration_line, calibration_loop
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-CALIBRATION_LOOPS = 3_000_000
-
-
-def calibration_loop() -> int:
-    """Run the fixed pure-Python workload."""
-    total = 0
-    for i in range(CALIBRATION_LOOPS):
-        total += i
-    return total
 
 
 def best_seconds(function: Callable[[], Any], repeat: int) -> float:
@@ -87,8 +79,7 @@ def main() -> int:
     from cone_feeder_sim.formats.cdr import CdrCodec
     from rosbags.typesys import get_typestore, Stores
     calibration = best_seconds(calibration_loop, args.repeat)
-    print(f'calibration: {CALIBRATION_LOOPS:,}-iteration pure-Python loop '
-          f'{calibration * 1e3:.1f} ms (best of {args.repeat})')
+    print(f'{calibration_line(calibration)} (best of {args.repeat})')
     codec = CdrCodec()
     typestore = get_typestore(Stores.ROS2_JAZZY)
     print(f'{"message":<32} {"operation":<9} {"cone_feeder_sim µs":>18} {"rosbags µs":>11} '

@@ -25,24 +25,14 @@ target is one tick period per 10^5 poses.
 """
 
 import argparse
-import time
 import timeit
 
+from calibration import calibration_line
 from cone_feeder_sim.ros.sim_node import SimNode
 from geometry_msgs.msg import Pose, PoseArray
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
-
-CALIBRATION_LOOPS = 3_000_000
-
-
-def calibration_loop() -> int:
-    """Run the fixed pure-Python workload."""
-    total = 0
-    for i in range(CALIBRATION_LOOPS):
-        total += i
-    return total
 
 
 def message(count: int) -> bytes:
@@ -61,10 +51,7 @@ def main() -> None:
     parser.add_argument('--sizes', type=int, nargs='+', default=[1_000, 100_000, 1_000_000])
     parser.add_argument('--repeat', type=int, default=5)
     args = parser.parse_args()
-    start = time.perf_counter()
-    calibration_loop()
-    print(f'calibration: {CALIBRATION_LOOPS:,}-iteration pure-Python loop '
-          f'{1e3 * (time.perf_counter() - start):.1f} ms')
+    print(calibration_line())
     rclpy.init()
     node = SimNode(parameter_overrides=[Parameter('record_path', value=''),
                                         Parameter('feed.rate', value=0.0),

@@ -183,15 +183,20 @@ def test_sigkill_loses_at_most_about_a_second(start: Any, tmp_path: Path) -> Non
     assert [t for t, _ in states] == sorted(t for t, _ in states)
 
 
-def test_unwritable_path_exits_with_an_error(tmp_path: Path) -> None:
+def start_failing(tmp_path: Path, record_path: str) -> subprocess.CompletedProcess:
+    """Run sim_node with ``record_path`` until it exits; return what it printed."""
     env = dict(os.environ)
     env['PYTHONPATH'] = os.pathsep.join([str(ROOT)] + (
         [env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
     env['ROS_DOMAIN_ID'] = str(random_domain())
-    proc = subprocess.run(
+    return subprocess.run(
         [sys.executable, '-m', 'cone_feeder_sim.ros.sim_node', '--ros-args', '-r',
-         f'__ns:=/unwritable{random.randrange(1_000_000)}', '-p', 'record_path:=/proc/run.mcap'],
+         f'__ns:=/refused{random.randrange(1_000_000)}', '-p', f'record_path:={record_path}'],
         env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+
+
+def test_unwritable_path_exits_with_an_error(tmp_path: Path) -> None:
+    proc = start_failing(tmp_path, '/proc/run.mcap')
     assert proc.returncode == 1
     output = proc.stdout + proc.stderr
     assert "cannot start: cannot open MCAP file '/proc/run.mcap' for writing" in output
@@ -203,14 +208,7 @@ def test_unwritable_path_exits_with_an_error(tmp_path: Path) -> None:
 ])
 def test_a_full_or_impossible_destination_is_one_line_and_status_1(
         tmp_path: Path, record_path: str, reason: str) -> None:
-    env = dict(os.environ)
-    env['PYTHONPATH'] = os.pathsep.join([str(ROOT)] + (
-        [env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
-    env['ROS_DOMAIN_ID'] = str(random_domain())
-    proc = subprocess.run(
-        [sys.executable, '-m', 'cone_feeder_sim.ros.sim_node', '--ros-args', '-r',
-         f'__ns:=/full{random.randrange(1_000_000)}', '-p', f'record_path:={record_path}'],
-        env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    proc = start_failing(tmp_path, record_path)
     assert proc.returncode == 1
     output = proc.stdout + proc.stderr
     assert 'Traceback' not in output
