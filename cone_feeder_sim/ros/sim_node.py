@@ -127,7 +127,7 @@ from .qos import rclpy_qos
 from .resim import load_resim_plan, ResimPlan
 from .. import __version__
 from ..errors import ConeFeederError, ParameterError
-from ..feeder.engine import check_feed_fits, FeederEngine, TickResult
+from ..feeder.engine import check_feed_fits, FeederEngine, MAX_PENDING_INPUTS, TickResult
 from ..formats.cdr import CdrError, default_codec
 from ..formats.mcap_writer import COMPRESSIONS
 from ..formats.messages import (
@@ -605,7 +605,13 @@ class SimNode(GuardedNode):
             response.success = False
             response.message = 're-simulating a recording: live inputs are refused until its end'
             return response
-        self._engine.reset()
+        try:
+            self._engine.reset()
+        except ConeFeederError as exc:  # the input queue is full
+            self._refuse('reset', 1, str(exc))
+            response.success = False
+            response.message = str(exc)
+            return response
         response.success = True
         response.message = 'reset queued: applied at the start of the next tick'
         if self._paused:
@@ -624,6 +630,7 @@ class SimNode(GuardedNode):
         if not self._paused:
             response.success = False
             response.message = 'not paused: call ~/pause with data: true first'
+            self._node_event('refused', input='~/step', count=1, reason=response.message)
             return response
         result = self.step()
         response.success = True
@@ -656,6 +663,14 @@ class SimNode(GuardedNode):
     # ------------------------------------------------------------------ parameters
 
     def _check_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        result = self._parameter_problem(parameters)
+        if not result.successful:
+            self._node_event('refused', input='parameters', count=len(parameters),
+                             reason=result.reason,
+                             values={p.name: p.value for p in parameters})
+        return result
+
+    def _parameter_problem(self, parameters: list[Parameter]) -> SetParametersResult:
         if self._resim_active:
             fixed = [p.name for p in parameters
                      if p.name in RUN_PARAMETERS or p.name.startswith('feed.')]
@@ -672,6 +687,11 @@ class SimNode(GuardedNode):
             check_feed_fits(self._engine.model, feed_from_values(values))
         except ConeFeederError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
+        if len(self._engine.pending) >= MAX_PENDING_INPUTS and any(
+                p.name in RUN_PARAMETERS or p.name.startswith('feed.') for p in parameters):
+            return SetParametersResult(
+                successful=False, reason=f'{MAX_PENDING_INPUTS} inputs are already waiting for '
+                'the next tick')
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:

@@ -24,6 +24,7 @@ import json
 import math
 from typing import Any
 
+from cone_feeder_sim.feeder.engine import MAX_PENDING_INPUTS
 from cone_feeder_sim.formats.cdr import decode
 from cone_feeder_sim.formats.topics import MessageRecord
 from cone_feeder_sim.ros.sim_node import SimNode
@@ -32,6 +33,7 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 import sim_process
+from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
 
@@ -149,3 +151,27 @@ def test_failed_pieces_are_events_and_the_mass_balances(ros: Ros) -> None:
     assert res.failed_mass == pytest.approx(sum(f['mass'] for f in failures), rel=1e-12)
     assert res.mass_in == pytest.approx(
         float(res.masses.sum()) + float(res.channel_mass.sum()) + res.failed_mass, rel=1e-12)
+
+
+def test_a_full_input_queue_refuses_commands_resets_and_parameters(ros: Ros) -> None:
+    sim = ros.sim(**{'feed.rate': 0.0})
+    records = watch(sim)
+    pause(ros)
+    for k in range(MAX_PENDING_INPUTS):
+        sim.engine.command(float(k % 3))
+    response = ros.call(Trigger, '/sim_node/reset', Trigger.Request(), timeout=20.0,
+                        ready_timeout=10.0)
+    assert not response.success and 'already waiting' in response.message
+    result = sim.set_parameters([Parameter('feed.rate', value=1.0)])[0]
+    assert not result.successful and 'already waiting' in result.reason
+    ros.client.create_publisher(Float64, 'rotation_cmd', 10).publish(Float64(data=1.0))
+    assert ros.spin_until(lambda: sim._refused >= 2, 20.0)
+    kinds = {e['input'] for e in events(records, 'refused')}
+    assert {'reset', 'parameters', 'rotation_cmd'} <= kinds
+    step(ros, sim)  # the queue empties with the tick; the node goes on
+    assert sim.engine.pending == ()
+    sim.set_paused(False)
+    response = ros.call(Trigger, '/sim_node/step', Trigger.Request(), timeout=20.0,
+                        ready_timeout=10.0)
+    assert not response.success
+    assert '~/step' in {e['input'] for e in events(records, 'refused')}
