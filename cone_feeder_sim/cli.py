@@ -47,7 +47,7 @@ from .formats.events_csv import EventsCsvWriter
 from .formats.mcap_reader import recover_mcap
 from .formats.runlog import ScenarioRecorder
 from .formats.scenario_file import load_scenario
-from .physics.simulation import Simulator, StepResult
+from .physics.simulation import Simulator, StepResult, warm_up
 
 
 class ProgressBar:
@@ -174,6 +174,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='draw at most N trajectories (default 60)')
     report.add_argument('--dpi', type=float, default=100.0,
                         help='resolution; the page is 17 x 9.6 inches (default 100)')
+    sub.add_parser(
+        'compile', help='compile the integration kernel into the numba cache (run once '
+                        'after installing, so that no start has to)')
     recover = sub.add_parser(
         'recover', help='copy the readable part of an unfinished or damaged MCAP file into a '
                         'complete one (with summary and footer)')
@@ -244,6 +247,19 @@ def cmd_report(args: argparse.Namespace, err: TextIO) -> int:
     return 0
 
 
+def cmd_compile(err: TextIO) -> int:
+    """Compile or load the kernel (numba's cache); say where it is and how long it took."""
+    from .physics.integrator import advance_batch
+    start = time.perf_counter()
+    warm_up()
+    seconds = time.perf_counter() - start
+    stats = advance_batch.stats
+    how = 'loaded from the cache' if stats.cache_hits and not stats.cache_misses else 'compiled'
+    err.write(f'integration kernel {how} in {seconds:.1f} s '
+              f'(cache: {stats.cache_path})\n')
+    return 0
+
+
 def cmd_recover(args: argparse.Namespace, err: TextIO) -> int:
     """Recover the readable part of an MCAP file; return the exit code."""
     if Path(args.out).resolve() == Path(args.mcap).resolve():
@@ -265,6 +281,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return cmd_report(args, sys.stderr)
         if args.command == 'recover':
             return cmd_recover(args, sys.stderr)
+        if args.command == 'compile':
+            return cmd_compile(sys.stderr)
     except ConeFeederError as exc:
         sys.stderr.write(f'error: {exc}\n')
         return 2

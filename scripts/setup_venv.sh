@@ -10,3 +10,6 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install --disable-pip-version-check -q -r requirements/test.txt
 .venv/bin/python -m pip install --disable-pip-version-check -q --no-deps -e .
+# Compile the integration kernel into numba's cache now, so that no start has to (about
+# 10-60 s once; later starts load it in well under a second).
+.venv/bin/cone-feeder-sim compile

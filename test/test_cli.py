@@ -220,3 +220,10 @@ def test_recover_makes_a_complete_file_of_an_unfinished_one(tmp_path: Path) -> N
     with contextlib.redirect_stderr(io.StringIO()):
         assert main(['recover', str(out), str(out)]) == 2
         assert main(['recover', str(tmp_path / 'missing.mcap'), str(out)]) == 2
+
+
+def test_compile_loads_or_compiles_the_kernel() -> None:
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert main(['compile']) == 0
+    assert 'integration kernel' in err.getvalue() and 'cache' in err.getvalue()

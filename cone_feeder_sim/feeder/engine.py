@@ -68,7 +68,7 @@ from ..physics.params import (
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
     add_particles, advance, as_points, check_positions, ExitEvents, Failure, SimParams, SimState,
-    StepStats, world_from_cone)
+    StepStats, warm_up, world_from_cone)
 
 __all__ = [
     'DriveParams',
@@ -421,6 +421,7 @@ class FeederEngine:
         self._index = 0
         self._state = SimState()
         self._channel_mass = np.zeros(config.model.channels.count)
+        warm_up(self._sim_params)  # the kernel is loaded now, never inside a tick
         self._start(0.0)
 
     def _start(self, t: float) -> None:

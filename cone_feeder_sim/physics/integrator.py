@@ -209,29 +209,53 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
     return ACTIVE, t, h_prop
 
 
-@jit
+def set_threads(count: int) -> int:
+    """
+    Set the threads that integrate pieces (0: every core numba found); return the count.
+
+    Results do not depend on it. Raises ValueError beyond the cores numba found.
+    """
+    available = numba.config.NUMBA_NUM_THREADS
+    if count < 0 or count > available:
+        raise ValueError(f'threads must be 0 (all) or 1..{available}, got {count}')
+    numba.set_num_threads(count or available)
+    return numba.get_num_threads()
+
+
+#: Pieces are integrated in this many independent groups (piece p in group p % GROUPS), each
+#: with its own scratch arrays; the groups run on numba's threads. The result of every piece
+#: depends on nothing but its own data, so it is the same for any thread count.
+GROUPS = 64
+
+
+@numba.njit(cache=True, error_model='numpy', parallel=True)
 def advance_batch(y, products, machine, seg_t, seg_omega, seg_domega, r_exit, h_prop, status,
                   t_event, rtol, atol, h_min, h_max, h_kink, max_steps, stats):
     """
-    Advance every ACTIVE particle over the interval seg_t[0]..seg_t[-1].
+    Advance every ACTIVE particle over the interval seg_t[0]..seg_t[-1], on all threads.
 
     y (N, 9) cone-axes states, products (N, PRODUCT_WIDTH) product rows, machine the global
     row, h_prop (N,) proposed step sizes, status (N,) int64, t_event (N,) receives exit or
-    failure times, atol (9,), stats (N, STAT_WIDTH) int64 counters. Arrays are updated in place.
+    failure times, atol (9,), stats (N, STAT_WIDTH) int64 counters. Arrays are updated in
+    place. The thread count is numba's (``numba.set_num_threads``); results do not depend
+    on it.
     """
     n = STATE_SIZE
-    work = np.empty((2, n, n))
-    piv = np.empty((2, 3), dtype=np.int64)
-    k = np.empty((n, n))
-    y1 = np.empty(n)
-    f0 = np.empty(n)
-    for p in range(y.shape[0]):
-        if status[p] != ACTIVE:
-            continue
-        st, t_ev, hp = advance_particle(y[p], products[p], machine, seg_t, seg_omega, seg_domega,
-                                        r_exit, h_prop[p], rtol, atol, h_min, h_max, h_kink,
-                                        max_steps,
-                                        stats[p], work, piv, k, y1, f0)
-        status[p] = st
-        t_event[p] = t_ev
-        h_prop[p] = hp
+    count = y.shape[0]
+    groups = min(count, GROUPS)
+    for g in numba.prange(groups):
+        work = np.empty((2, n, n))
+        piv = np.empty((2, 3), dtype=np.int64)
+        k = np.empty((n, n))
+        y1 = np.empty(n)
+        f0 = np.empty(n)
+        for p in range(g, count, groups):
+            if status[p] != ACTIVE:
+                continue
+            st, t_ev, hp = advance_particle(y[p], products[p], machine, seg_t, seg_omega,
+                                            seg_domega, r_exit, h_prop[p], rtol, atol, h_min,
+                                            h_max, h_kink, max_steps, stats[p], work, piv, k,
+                                            y1, f0)
+            status[p] = st
+            t_event[p] = t_ev
+            h_prop[p] = hp

@@ -408,3 +408,20 @@ def resting_height(model: ModelParams, product: ProductParams, x: float, y: floa
             f'a piece of mass {product.m} kg cannot rest on the cone with r_f = {product.r_f} N')
     gap = product.r_c + math.atanh(1.0 - 2.0 * r_a_rest) / product.r_t
     return cone_surface_height(model, x, y) + gap
+
+
+def warm_up(params: SimParams | None = None) -> None:
+    """
+    Compile (or load from numba's cache) the integration kernel now, not inside a tick.
+
+    Runs a tiny integration of one piece with ``params`` (the kinds of arrays a run passes
+    make the kernel's signature, so warming up with the run's own parameters loads exactly
+    the kernel the run calls). A first call after an install compiles, about 10–60 s
+    depending on the machine; later ones load the cache in well under a second.
+    """
+    params = params if params is not None else SimParams()
+    model = params.model
+    x = 0.5 * model.r
+    start = (x, 0.0, resting_height(model, model.product, x, 0.0))
+    state, _ = add_particles(SimState(), params, [start], None, None, omega=0.0)
+    advance(state, params, RotationProfile.constant(1.0), 1.0e-3)

@@ -70,6 +70,7 @@ NODE_LIMITS: dict[str, Limit] = {
     'real_time_factor': Limit(0.0, 100.0, ''),
     'markers.rate': Limit(0.0, 1000.0, '1/s'),
     'diagnostics.period': Limit(0.05, 3600.0, 's'),
+    'threads': Limit(0, 1024, ''),
     'record_max_file_size': Limit(0, 2 ** 62, 'bytes'),
     'record_max_file_duration': Limit(0.0, 1.0e9, 's'),
     'record_min_free_space': Limit(0, 2 ** 62, 'bytes'),
@@ -97,7 +98,7 @@ DEFAULT_D_VALUES = (30.0, 135.0, 225.0, 750.0)
 #: start state of the timer, the outputs of this run).
 LIVE_PARAMETERS = ('real_time_factor', 'start_paused', 'diagnostics.period', 'record_path',
                    'record_compression', 'record_max_file_size', 'record_max_file_duration',
-                   'record_min_free_space', 'replay_commands')
+                   'record_min_free_space', 'replay_commands', 'threads')
 #: Run-time parameters that change what the simulation does (refused while re-simulating).
 RUN_PARAMETERS = ('max_angular_velocity', 'max_angular_acceleration', 'cmd_timeout',
                   'open_loop_pattern', 'markers.rate')
@@ -294,6 +295,8 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
                   'the cone', dynamic=True, limit=ENGINE_LIMITS['max_pieces']),
         ParamSpec('feed.seed', 0, 'seed of the random generator of the feed',
                   limit=ENGINE_LIMITS['seed']),
+        ParamSpec('threads', 0, 'threads that integrate the pieces (0 = every core); the '
+                  'results are the same for any count', limit=NODE_LIMITS['threads']),
         ParamSpec('spawn.max_height', 1.0, 'highest start of a spawned piece (m, z of its centre '
                   'above the cone base); spawn poses above it are refused',
                   limit=ENGINE_LIMITS['spawn_max_height']),

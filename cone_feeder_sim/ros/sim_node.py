@@ -139,6 +139,7 @@ from ..formats.runlog import (
     engine_config_json, engine_input_from_event, event_text, expand_record_path, failure_event,
     FORMAT_VERSION, input_event, INPUT_EVENTS, METADATA_NAME, parameter_text, to_jsonable)
 from ..formats.topics import COMMAND_QOS, MessageRecord, QosProfile, TOPICS
+from ..physics.integrator import set_threads
 from ..physics.params import model_params_from_mapping
 from ..physics.simulation import position_problems
 
@@ -227,6 +228,10 @@ class SimNode(GuardedNode):
             if spec.name not in ('parameter_file', 'replay_commands'):
                 self._declare(spec)
         values = self._values()
+        try:
+            set_threads(int(values['threads']))
+        except ValueError as exc:
+            raise ParameterError(str(exc)) from exc
         self._engine = FeederEngine(engine_config_from_values(values, self._base_model))
         self._frame = str(values['frame_id'])
         self._rtf = float(values['real_time_factor'])

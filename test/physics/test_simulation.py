@@ -20,8 +20,9 @@ from cone_feeder_sim.errors import ScenarioError
 from cone_feeder_sim.physics.params import ModelParams, ProductParams, SolverParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
-    add_particles, advance, cone_from_world, remove_particles, SimParams, SimState, Simulator,
-    world_from_cone)
+    add_particles, advance, cone_from_world, remove_particles, resting_height, SimParams,
+    SimState, Simulator, world_from_cone)
+import numba
 import numpy as np
 import pytest
 
@@ -135,3 +136,33 @@ def test_simulator_wrapper() -> None:
     assert math.hypot(*q[0, :2]) == pytest.approx(0.05)
     sim.advance_to(0.6)
     assert sim.t == 0.6
+
+
+def test_results_are_the_same_for_any_thread_count() -> None:
+    model = ModelParams()
+    params = SimParams(model=model)
+    rng = np.random.default_rng(5)
+    count = 200  # more than the integrator's groups: every group holds several pieces
+    rho = np.sqrt(rng.uniform(0.03 ** 2, 0.2 ** 2, count))
+    theta = rng.uniform(0.0, 2.0 * np.pi, count)
+    x, y = rho * np.cos(theta), rho * np.sin(theta)
+    z = [resting_height(model, model.product, a, b) + rng.uniform(0.0, 0.02)
+         for a, b in zip(x, y)]
+    start, _ = add_particles(SimState(), params, np.column_stack([x, y, z]), None, None,
+                             omega=0.0)
+    profile = RotationProfile.from_table([[0.0, 0.0], [0.3, -8.0], [0.6, 8.0]])
+    before = numba.get_num_threads()
+    finals = []
+    try:
+        for threads in sorted({1, before}):
+            numba.set_num_threads(threads)
+            state = start
+            for k in range(1, 26):
+                state = advance(state, params, profile, 0.02 * k).state
+            finals.append(state)
+    finally:
+        numba.set_num_threads(before)
+    for other in finals[1:]:
+        np.testing.assert_array_equal(other.y, finals[0].y)
+        np.testing.assert_array_equal(other.ids, finals[0].ids)
+        np.testing.assert_array_equal(other.step_size, finals[0].step_size)
