@@ -52,7 +52,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def measure(pieces: int, seconds: float, window: float, rate: float,
-            extra: list[str]) -> dict[str, float]:
+            extra: list[str], tree: Path) -> dict[str, float]:
     """Run one node with ``pieces`` on the cone; return the measured figures."""
     domain = random.randrange(1, 200)
     context = Context()
@@ -73,12 +73,14 @@ def measure(pieces: int, seconds: float, window: float, rate: float,
         DiagnosticArray, '/diagnostics', lambda m: diags.extend(
             {kv.key: kv.value for kv in s.values} for s in m.status
             if s.name.endswith('simulation')), 10)
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONPATH=str(tree))
+    module = ('cone_feeder_sim.ros.sim_node' if (tree / 'cone_feeder_sim' / 'ros').is_dir()
+              else 'cone_feeder_sim.sim_node')  # the layout before 0.2
     with tempfile.TemporaryDirectory() as tmp:
         start = time.monotonic()
         proc = subprocess.Popen(
-            [sys.executable, '-m', 'cone_feeder_sim.ros.sim_node', '--ros-args',
-             '--params-file', str(ROOT / 'config' / 'sim_node.yaml'),
+            [sys.executable, '-m', module, '--ros-args',
+             '--params-file', str(tree / 'config' / 'sim_node.yaml'),
              '-p', 'publish_clock:=true', '-p', f'feed.rate:={rate}',
              '-p', f'feed.max_pieces:={pieces}', '-p', f'record_path:={tmp}/run.mcap',
              *[arg for item in extra for arg in ('-p', item)]],
@@ -125,17 +127,21 @@ def main() -> None:
     parser.add_argument('--seconds', type=float, default=60.0)
     parser.add_argument('--window', type=float, default=10.0)
     parser.add_argument('--rate', type=float, default=500.0, help='feed.rate (pieces/s)')
+    parser.add_argument('--tree', type=Path, default=ROOT,
+                        help='source tree of the node to measure (e.g. an old main checked out '
+                             'in a temporary directory); default: this one')
     parser.add_argument('-p', dest='extra', action='append', default=[],
                         help='another parameter of the node, NAME:=VALUE (repeatable)')
     args = parser.parse_args()
     print(calibration_line())
+    print(f'# tree {args.tree}')
     print(f'# {args.seconds:g} s of wall time per count, 50 Hz, recording on, '
           f'{" ".join(args.extra) or "default parameters"}, '
           f'load average {" ".join(f"{v:.2f}" for v in os.getloadavg())}')
     print(f'{"pieces":>7} {"start s":>8} {"RTF":>6} {"worst":>6} {"step ms":>8} '
           f'{"pub ms":>7} {"max ms":>7}')
     for count in args.pieces:
-        r = measure(count, args.seconds, args.window, args.rate, args.extra)
+        r = measure(count, args.seconds, args.window, args.rate, args.extra, args.tree)
         print(f'{int(r["pieces"]):>7} {r["start_s"]:>8.2f} {r["rtf"]:>6.3f} '
               f'{r["worst_rtf"]:>6.3f} {r["step_ms"]:>8.2f} {r["publish_ms"]:>7.2f} '
               f'{r["step_max_ms"]:>7.1f}', flush=True)
