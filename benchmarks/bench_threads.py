@@ -66,7 +66,7 @@ def main() -> None:
     args = parser.parse_args()
     print(calibration_line())
     params = SimParams(model=ModelParams())
-    warm_up(params)
+    warm_up()
     profile = RotationProfile.from_table([[0.0, 0.0], [0.4, -8.0], [1.0, -8.0], [1.4, 8.0]])
     cores = numba.config.NUMBA_NUM_THREADS
     print(f'# {args.intervals} intervals of 20 ms, reversing, 1 thread vs {cores}')

@@ -421,7 +421,7 @@ class FeederEngine:
         self._index = 0
         self._state = SimState()
         self._channel_mass = np.zeros(config.model.channels.count)
-        warm_up(self._sim_params)  # the kernel is loaded now, never inside a tick
+        warm_up()  # the kernel is loaded now, never inside a tick
         self._start(0.0)
 
     def _start(self, t: float) -> None:

@@ -410,16 +410,18 @@ def resting_height(model: ModelParams, product: ProductParams, x: float, y: floa
     return cone_surface_height(model, x, y) + gap
 
 
-def warm_up(params: SimParams | None = None) -> None:
+def warm_up() -> None:
     """
     Compile (or load from numba's cache) the integration kernel now, not inside a tick.
 
-    Runs a tiny integration of one piece with ``params`` (the kinds of arrays a run passes
-    make the kernel's signature, so warming up with the run's own parameters loads exactly
-    the kernel the run calls). A first call after an install compiles, about 10–60 s
-    depending on the machine; later ones load the cache in well under a second.
+    Runs a tiny integration of one piece with the default parameters: the kernel's
+    signature depends on the kinds of arrays, which are the same for every run (SimParams
+    makes the same read-only rows whatever the values), so this loads exactly the kernel a
+    run calls, and cannot fail on a run's own parameters. A first call after an install
+    compiles (about 10 s on the development machine); later ones load the cache in well
+    under a second.
     """
-    params = params if params is not None else SimParams()
+    params = SimParams()
     model = params.model
     x = 0.5 * model.r
     start = (x, 0.0, resting_height(model, model.product, x, 0.0))
