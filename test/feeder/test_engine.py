@@ -20,6 +20,7 @@ from cone_feeder_sim.errors import InputError, ParameterError, ScenarioError
 from cone_feeder_sim.feeder.engine import (
     drive_profile, DriveParams, EngineConfig, FeederEngine, FeedParams, MAX_PENDING_INPUTS,
     pattern_from_flat, PieceSpec, Reconfigure, ResetRequest, RotationCommand, SpawnRequest)
+from cone_feeder_sim.physics.integrator import advance_batch
 from cone_feeder_sim.physics.params import ModelParams, SolverParams
 from cone_feeder_sim.physics.simulation import resting_height
 import numpy as np
@@ -474,3 +475,15 @@ def test_mass_balance_with_exits_spawns_and_a_reset() -> None:
             float(res.masses.sum()) + float(res.channel_mass.sum()) + res.failed_mass,
             rel=1e-12)
     assert exited > 0
+
+
+def test_no_kernel_is_compiled_inside_a_tick() -> None:
+    eng = engine(model=ModelParams(g=5.0, cone_tilt=20.0), solver=SolverParams(rtol=1e-4),
+                 feed=FeedParams(rate=100.0), initial_pieces=table_i_pieces())
+    loaded = list(advance_batch.signatures)  # the engine loaded the kernel when built
+    assert loaded
+    eng.spawn([resting(0.2, 0.0)], velocities=[(2.0, 0.0, 0.0)])
+    eng.command(8.0)
+    for _ in range(30):
+        eng.tick()
+    assert list(advance_batch.signatures) == loaded
