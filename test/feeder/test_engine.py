@@ -478,8 +478,8 @@ def test_mass_balance_with_exits_spawns_and_a_reset() -> None:
 
 
 def test_no_kernel_is_compiled_inside_a_tick() -> None:
-    eng = engine(model=ModelParams(g=5.0, cone_tilt=20.0), solver=SolverParams(rtol=1e-4),
-                 feed=FeedParams(rate=100.0), initial_pieces=table_i_pieces())
+    eng = engine(model=ModelParams(g=5.0, cone_tilt=9.0), solver=SolverParams(rtol=1e-4),
+                 feed=FeedParams(rate=100.0))
     loaded = list(advance_batch.signatures)  # the engine loaded the kernel when built
     assert loaded
     eng.spawn([resting(0.2, 0.0)], velocities=[(2.0, 0.0, 0.0)])
