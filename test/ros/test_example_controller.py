@@ -78,9 +78,11 @@ def context() -> Iterator[Context]:
 
 
 def test_controller_drives_the_simulator(context: Context) -> None:
+    # as fast as possible: between two commands of the controller's wall-clock timer more
+    # than any cmd_timeout of simulated time can pass, so the last command is held
     sim = SimNode(context=context, namespace='/loop', parameter_overrides=[
         Parameter('real_time_factor', value=0.0), Parameter('feed.rate', value=20.0),
-        Parameter('record_path', value='')])
+        Parameter('record_path', value=''), Parameter('cmd_timeout', value=0.0)])
     ctl = ExampleController(context=context, namespace='/loop', parameter_overrides=[
         Parameter('speed', value=6.0), Parameter('period', value=0.5)])
     executor = SingleThreadedExecutor(context=context)
