@@ -159,6 +159,19 @@ def test_stop_on_signals_leaves_an_ignored_signal_ignored() -> None:
         signal.signal(signal.SIGINT, previous)
 
 
+class FakeStep:
+    """What the progress bar reads of a step result."""
+
+    exits = ()
+
+
+class FakeSim:
+    """What the progress bar reads of a simulator."""
+
+    class state:  # noqa: N801 - mimics Simulator.state
+        count = 3
+
+
 def test_progress_bar_on_a_terminal_ends_its_line() -> None:
     class Terminal(io.StringIO):
 
@@ -168,14 +181,7 @@ def test_progress_bar_on_a_terminal_ends_its_line() -> None:
     stream = Terminal()
     bar = ProgressBar(1.0, stream)
 
-    class Step:
-        exits = ()
-
-    class Sim:
-        class state:  # noqa: N801 - mimics Simulator.state
-            count = 3
-
-    bar(0.5, Sim(), Step())  # type: ignore[arg-type]
+    bar(0.5, FakeSim(), FakeStep())  # type: ignore[arg-type]
     assert stream.getvalue().startswith('\r[') and not stream.getvalue().endswith('\n')
     bar.end()
     bar.end()
@@ -186,15 +192,8 @@ def test_progress_bar_on_a_pipe_prints_every_tenth() -> None:
     stream = io.StringIO()
     bar = ProgressBar(1.0, stream)
 
-    class Step:
-        exits = ()
-
-    class Sim:
-        class state:  # noqa: N801 - mimics Simulator.state
-            count = 3
-
     for k in range(1, 101):
-        bar(k / 100.0, Sim(), Step())  # type: ignore[arg-type]
+        bar(k / 100.0, FakeSim(), FakeStep())  # type: ignore[arg-type]
     lines = stream.getvalue().splitlines()
     assert len(lines) == 11 and lines[-1].startswith('[' + '#' * 30 + ']')
 

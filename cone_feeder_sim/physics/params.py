@@ -58,6 +58,15 @@ class Limit:
         return above and below
 
 
+def _in_range(key: str, number: float | int, limit: Limit) -> Any:
+    """Return number if the limit contains it; otherwise raise naming key and the range."""
+    if not limit.contains(number):
+        shown = f'{number:g}' if isinstance(number, float) else str(number)
+        raise ParameterError(
+            f'parameter {key!r} = {shown} is out of range: allowed {limit.describe()}')
+    return number
+
+
 def check_number(key: str, value: Any, limit: Limit) -> float:
     """Return value as float after checking type, finiteness and range; name key on failure."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
@@ -68,10 +77,7 @@ def check_number(key: str, value: Any, limit: Limit) -> float:
     if not math.isfinite(number):
         raise ParameterError(
             f'parameter {key!r} must be finite, in {limit.describe()}, got {number!r}')
-    if not limit.contains(number):
-        raise ParameterError(
-            f'parameter {key!r} = {number:g} is out of range: allowed {limit.describe()}')
-    return number
+    return _in_range(key, number, limit)
 
 
 def check_integer(key: str, value: Any, limit: Limit) -> int:
@@ -85,11 +91,7 @@ def check_integer(key: str, value: Any, limit: Limit) -> int:
         raise ParameterError(
             f'parameter {key!r} must be an integer in {limit.describe()}, '
             f'got {type(value).__name__} {value!r}')
-    number = int(value)
-    if not limit.contains(number):
-        raise ParameterError(
-            f'parameter {key!r} = {number} is out of range: allowed {limit.describe()}')
-    return number
+    return _in_range(key, int(value), limit)
 
 
 def check_choice(key: str, value: Any, choices: tuple[str, ...]) -> str:

@@ -204,6 +204,18 @@ def test_recording_holds_every_topic_the_inputs_and_the_parameters(
         len(v) for v in bag.values())
 
 
+def resimulate(source: Path, again: Path, **params: Any) -> int:
+    """Re-simulate ``source`` into ``again`` until the end; return the ticks it made."""
+    ros = Ros()
+    try:
+        sim = ros.sim(replay_commands=str(source), record_path=str(again),
+                      real_time_factor=0.0, **params)
+        assert ros.spin_until(lambda: not sim.replaying, 120.0)
+        return sim.engine.tick_index
+    finally:
+        ros.close()
+
+
 def test_resimulation_reproduces_the_recorded_run(tmp_path: Path) -> None:
     original = tmp_path / 'original.mcap'
     again = tmp_path / 'again.mcap'
@@ -331,14 +343,7 @@ def test_resimulation_reproduces_failed_pieces(tmp_path: Path) -> None:
         ticks = sim.engine.tick_index
     finally:
         first.close()
-    second = Ros()
-    try:
-        sim = second.sim(replay_commands=str(original), record_path=str(again),
-                         real_time_factor=0.0)
-        assert second.spin_until(lambda: not sim.replaying, 120.0)
-        assert sim.engine.tick_index == ticks
-    finally:
-        second.close()
+    assert resimulate(original, again) == ticks
     a, b = read_bag(original), read_bag(again)
     failed_a = [e for e in events(a, '/sim_node/events') if e['event'] == 'failure']
     failed_b = [e for e in events(b, '/sim_node/events') if e['event'] == 'failure']
@@ -364,14 +369,7 @@ def test_a_split_run_is_read_by_rosbags_and_resimulated_exactly(tmp_path: Path) 
     for part in parts:
         bag = read_bag(part)  # each file on its own: complete and readable
         assert bag['/particle_states'] and read_metadata(part)[METADATA_NAME]
-    second = Ros()
-    try:
-        sim = second.sim(replay_commands=str(tmp_path / 'split'), record_path=str(again),
-                         real_time_factor=0.0, record_max_file_duration=0.0)
-        assert second.spin_until(lambda: not sim.replaying, 120.0)
-        assert sim.engine.tick_index == ticks
-    finally:
-        second.close()
+    assert resimulate(tmp_path / 'split', again, record_max_file_duration=0.0) == ticks
     b = read_bag(again)
     a: dict[str, list[tuple[int, Any]]] = {}
     for part in parts:
