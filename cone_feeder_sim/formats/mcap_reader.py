@@ -22,12 +22,13 @@ the disk filled up, the copy was cut short) is read sequentially up to the first
 that is incomplete or fails its CRC: :attr:`Recording.problem` says why, and everything
 before that point is still delivered. :class:`RecordStream` is that sequential reading on
 its own (the records of a stream in file order, up to the first unreadable one), for
-readers that want the records themselves. :func:`load_resim_plan` turns a recording of
-``sim_node`` into what re-simulation needs: the recorded parameters and the engine inputs
-by tick index.
+readers that want the records themselves. A run split by the recorder into several files
+is read as one (:func:`run_parts`, :class:`SplitRecording`); :func:`recover_mcap` copies
+the readable part of a damaged file into a complete one.
 """
 
 from collections.abc import Iterator, Sequence
+import dataclasses
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
@@ -42,7 +43,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from .mcap_writer import _open_for_writing, LIBRARY
-from .run_recorder import PART_METADATA_NAME, part_path
+from .run_recorder import PART_METADATA_NAME, part_number, part_path
 from ..errors import RecordingError
 
 try:  # zstandard is optional for mcap; only needed to recognise its errors here.
@@ -110,8 +111,8 @@ class RecordStream:
     checked, and stops at the end of the file or at the first record that is incomplete or
     damaged: :attr:`error` is then what reading it raised (None while none was raised).
     The stream's position is where reading stopped. :attr:`schemas` and :attr:`channels`
-    hold the schema and channel records seen so far (the first of each id), so that
-    :meth:`channel_of` resolves a message as soon as it is yielded.
+    hold the schema and channel records seen so far (the first of each id), so a message
+    can be resolved as soon as it is yielded.
     """
 
     def __init__(self, stream: BinaryIO) -> None:
@@ -137,13 +138,6 @@ class RecordStream:
                 self.channels.setdefault(record.id, record)
             yield record
 
-    def channel_of(self, message: Message) -> tuple[Channel, Schema | None] | None:
-        """Return the channel of a message and its schema; None for an unknown channel."""
-        channel = self.channels.get(message.channel_id)
-        if channel is None:
-            return None
-        return channel, self.schemas.get(channel.schema_id)
-
 
 @dataclass
 class Recording:
@@ -163,7 +157,6 @@ class Recording:
     end_ns: int | None
     message_count: int
     problem: str | None = None
-    _channels: dict[int, tuple[str, str]] = field(default_factory=dict, repr=False)
     #: Log time from which a complete file's data are damaged (None: intact as far as known).
     _damaged_from_ns: int | None = field(default=None, repr=False)
 
@@ -206,23 +199,30 @@ class Recording:
     def _sequential(self, topics: set[str] | None, start_ns: int | None,
                     end_ns: int | None) -> Iterator[RecordedMessage]:
         with _open(self.path) as stream:
-            channels: dict[int, tuple[str, str]] = {}
-            schemas: dict[int, str] = {}
             # up to the end of the readable part (the problem is known already)
-            for record in RecordStream(stream):
-                if isinstance(record, Schema):
-                    schemas[record.id] = record.name
-                elif isinstance(record, Channel):
-                    channels[record.id] = (record.topic, schemas.get(record.schema_id, ''))
-                elif isinstance(record, Message) and record.channel_id in channels:
-                    topic, type_name = channels[record.channel_id]
-                    if topics is not None and topic not in topics:
-                        continue
-                    if start_ns is not None and record.log_time < start_ns:
-                        continue
-                    if end_ns is not None and record.log_time > end_ns:
-                        continue
-                    yield RecordedMessage(topic, type_name, record.log_time, record.data)
+            records = RecordStream(stream)
+            for record in records:
+                if not isinstance(record, Message):
+                    continue
+                channel = records.channels.get(record.channel_id)
+                if channel is None or (topics is not None and channel.topic not in topics):
+                    continue
+                if start_ns is not None and record.log_time < start_ns:
+                    continue
+                if end_ns is not None and record.log_time > end_ns:
+                    continue
+                yield RecordedMessage(channel.topic,
+                                      _type_name(records.schemas.get(channel.schema_id)),
+                                      record.log_time, record.data)
+
+
+def _count_topic(topics: dict[str, RecordedTopic], found: RecordedTopic) -> None:
+    """Add a topic to ``topics``; a topic met again (another channel, file) adds its count."""
+    known = topics.get(found.topic)
+    if known is not None:
+        found = dataclasses.replace(known, message_count=known.message_count
+                                    + found.message_count)
+    topics[found.topic] = found
 
 
 def _read_complete(path: Path) -> Recording | None:
@@ -238,16 +238,12 @@ def _read_complete(path: Path) -> Recording | None:
             return None
         damaged = _first_damaged_chunk(stream, summary.chunk_indexes)
     stats = summary.statistics
-    channels = {}
-    topics = {}
+    topics: dict[str, RecordedTopic] = {}
     for channel in summary.channels.values():
-        type_name = _type_name(summary.schemas.get(channel.schema_id))
-        channels[channel.id] = (channel.topic, type_name)
-        count = stats.channel_message_counts.get(channel.id, 0)
-        known = topics.get(channel.topic)
-        topics[channel.topic] = RecordedTopic(
-            channel.topic, type_name, channel.metadata.get('offered_qos_profiles', ''),
-            count + (known.message_count if known is not None else 0))
+        _count_topic(topics, RecordedTopic(
+            channel.topic, _type_name(summary.schemas.get(channel.schema_id)),
+            channel.metadata.get('offered_qos_profiles', ''),
+            stats.channel_message_counts.get(channel.id, 0)))
     count = stats.message_count
     start = stats.message_start_time if count else None
     end = stats.message_end_time if count else None
@@ -262,8 +258,8 @@ def _read_complete(path: Path) -> Recording | None:
         start = start if end is not None else None
         problem = (f'damaged chunk at byte {index.chunk_start_offset} ({reason}): messages '
                    f'from log time {damaged_from} ns on are not read')
-    return Recording(path, True, topics, metadata, start, end, count, problem, channels,
-                     damaged_from)
+    return Recording(path, True, topics, metadata, start, end, count, problem,
+                     _damaged_from_ns=damaged_from)
 
 
 def _first_damaged_chunk(stream: BinaryIO, indexes: list[Any]) -> tuple[Any, str] | None:
@@ -371,42 +367,41 @@ def run_parts(source: RunSource) -> list[Path]:
     brings its parts ``<stem>_2.mcap``, ``<stem>_3.mcap``... along (as long as they exist
     and their ``cone_feeder_sim.part`` record names the same run).
     """
+    return [part.path for part in _open_run(source)]
+
+
+def _open_run(source: RunSource) -> list[Recording]:
+    """Open every file of a recording once, in order (see :func:`run_parts`)."""
     if not isinstance(source, (str, os.PathLike)):
         paths = [Path(p) for p in source]
         if not paths:
             raise RecordingError('an empty list of recordings')
-        return paths
+        return [_open_file(path) for path in paths]
     path = Path(source)
     if path.is_dir():
         files = sorted(path.glob('*.mcap'))
         if not files:
             raise RecordingError(f'{str(path)!r} holds no .mcap file')
-        stems = {f.stem for f in files}
-
-        def is_part(file: Path) -> bool:  # <stem>_<n> next to <stem>
-            head, _, tail = file.stem.rpartition('_')
-            return tail.isdigit() and head in stems
-
-        ordered: list[Path] = []
-        for first in (f for f in files if not is_part(f)):
-            ordered += run_parts(first)
-        return ordered + [f for f in files if f not in ordered]
-    parts = [path]
-    run = _part_record(path).get('run')
+        opened: list[Recording] = []
+        for first in (f for f in files
+                      if not any(part_number(g, f) for g in files if g != f)):
+            opened += [r for r in _open_run(first) if r.path not in {o.path for o in opened}]
+        claimed = {r.path for r in opened}
+        return opened + [_open_file(f) for f in files if f not in claimed]
+    parts = [_open_file(path)]
+    run = parts[0].metadata.get(PART_METADATA_NAME, {}).get('run')
     while run is not None:
         following = part_path(path, len(parts) + 1)
-        if not following.is_file() or _part_record(following).get('run') != run:
+        if not following.is_file():
             break
-        parts.append(following)
+        try:
+            part = _open_file(following)
+        except RecordingError:
+            break
+        if part.metadata.get(PART_METADATA_NAME, {}).get('run') != run:
+            break
+        parts.append(part)
     return parts
-
-
-def _part_record(path: Path) -> dict[str, str]:
-    """Return the ``cone_feeder_sim.part`` record of a file ({} if none or unreadable)."""
-    try:
-        return _open_file(path).metadata.get(PART_METADATA_NAME, {})
-    except RecordingError:
-        return {}
 
 
 class SplitRecording:
@@ -425,11 +420,8 @@ class SplitRecording:
         self.complete = all(part.complete for part in parts)
         self.topics: dict[str, RecordedTopic] = {}
         for part in parts:
-            for topic, info in part.topics.items():
-                known = self.topics.get(topic)
-                count = info.message_count + (known.message_count if known else 0)
-                self.topics[topic] = RecordedTopic(topic, info.type_name, info.offered_qos,
-                                                   count)
+            for info in part.topics.values():
+                _count_topic(self.topics, info)
         self.metadata: dict[str, dict[str, str]] = {}
         for part in parts:
             self.metadata.update(part.metadata)
@@ -465,7 +457,7 @@ def open_recording(source: RunSource) -> Recording | SplitRecording:
     Complete files are read through their index, others up to their first unreadable
     record. Raises RecordingError when a file cannot be opened or does not start as MCAP.
     """
-    parts = [_open_file(path) for path in run_parts(source)]
+    parts = _open_run(source)
     return parts[0] if len(parts) == 1 else SplitRecording(parts)
 
 

@@ -144,15 +144,14 @@ class McapRecorder:
                 self._stream, chunk_size=_NEVER, compression=COMPRESSIONS[compression])
             self._writer.start(profile=PROFILE, library=LIBRARY)
             self._flush_stream()
-        except McapError as err:  # e.g. the compression library is missing
-            self._stream.close()
-            raise RecordingError(f'cannot start MCAP file {str(self._path)!r}: {err}') from err
-        except OSError as err:  # e.g. no space left on the device
+        except BaseException as err:
             _close_stream(self._stream)
-            raise RecordingError(f'cannot write MCAP file {str(self._path)!r}: '
-                                 f'{err.strerror or err}') from err
-        except BaseException:
-            self._stream.close()
+            if isinstance(err, McapError):  # e.g. the compression library is missing
+                raise RecordingError(
+                    f'cannot start MCAP file {str(self._path)!r}: {err}') from err
+            if isinstance(err, OSError):  # e.g. no space left on the device
+                raise RecordingError(f'cannot write MCAP file {str(self._path)!r}: '
+                                     f'{err.strerror or err}') from err
             raise
         self._chunk_size = chunk_size
         self._pending_bytes = 0

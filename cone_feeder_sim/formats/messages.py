@@ -17,12 +17,9 @@ The simulator's topics and messages, built without rclpy.
 
 Both the ROS 2 node (:mod:`cone_feeder_sim.ros.sim_node`) and the headless runner's MCAP output
 (``cone-feeder-sim run ... --mcap``) build their messages here, so a live run and a batch
-run carry the same topics, types, QoS and point layouts. Messages are plain mappings that
+run carry the same messages (topics and QoS: :mod:`cone_feeder_sim.formats.topics`; point
+layouts: :mod:`cone_feeder_sim.formats.pointcloud`). Messages are plain mappings that
 :mod:`cone_feeder_sim.formats.cdr` encodes; arrays are numpy arrays.
-
-:data:`TOPICS` lists every topic with its type and offered QoS (as
-:class:`~cone_feeder_sim.formats.topics.QosProfile`, which the node converts to rclpy's profile
-and the recorder writes into the channel metadata).
 """
 
 import math
@@ -49,11 +46,6 @@ __all__ = [
     'stamp_ns',
     'states_message',
 ]
-
-# --------------------------------------------------------------------------- topics
-
-
-# --------------------------------------------------------------------------- point layouts
 
 # --------------------------------------------------------------------------- messages
 

@@ -34,7 +34,6 @@ from dataclasses import dataclass
 import os
 from pathlib import Path
 import queue
-import re
 import shutil
 import threading
 import time
@@ -46,7 +45,7 @@ from .topics import MessageRecord, QosProfile
 from ..errors import RecordingError
 
 __all__ = ['END_METADATA_NAME', 'PART_METADATA_NAME', 'RecordingLimits', 'RunRecorder',
-           'make_parent_dir', 'part_path']
+           'make_parent_dir', 'part_number', 'part_path']
 
 #: Name of the metadata record that tells which run and which part a file is.
 PART_METADATA_NAME = 'cone_feeder_sim.part'
@@ -83,6 +82,14 @@ class RecordingLimits:
 def part_path(first: Path, part: int) -> Path:
     """Return the path of part ``part`` (1-based) of a recording whose first file is ``first``."""
     return first if part == 1 else first.with_name(f'{first.stem}_{part}{first.suffix}')
+
+
+def part_number(first: Path, candidate: Path) -> int | None:
+    """Return n when ``candidate`` is named as part n >= 2 of ``first``, else None."""
+    head, _, tail = candidate.stem.rpartition('_')
+    if candidate.parent != first.parent or candidate.suffix != first.suffix:
+        return None
+    return int(tail) if head == first.stem and tail.isdigit() and int(tail) >= 2 else None
 
 
 def _free_bytes(directory: Path) -> int:
@@ -128,11 +135,9 @@ class RunRecorder:
         if self._first.exists() and not self._first.is_file():
             raise RecordingError(f'{str(self._first)!r} is not a regular file')
         make_parent_dir(self._first)
-        stem, suffix = self._first.stem, self._first.suffix
-        parts = re.compile(rf'{re.escape(stem)}_\d+{re.escape(suffix)}')
         taken = [self._first] if self._first.exists() else []
-        taken += sorted(p for p in self._first.parent.glob(f'{stem}_*{suffix}')
-                        if parts.fullmatch(p.name))
+        taken += sorted(p for p in self._first.parent.glob(f'{self._first.stem}_*')
+                        if part_number(self._first, p))
         if taken:
             raise RecordingError(f'{str(taken[0])!r} exists: a recording never overwrites a '
                                  'file (choose another record_path or move the old run)')

@@ -246,9 +246,6 @@ def engine_input_from_event(event: Mapping[str, Any]) -> EngineInput:
     raise ConeFeederError(f'event {kind!r} is not an engine input')
 
 
-# --------------------------------------------------------------------------- the node's recorder
-
-
 # --------------------------------------------------------------------------- the runner's recorder
 
 

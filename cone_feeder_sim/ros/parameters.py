@@ -46,6 +46,7 @@ from ..physics.params import (
     PRODUCT_LIMITS, SOLVER_LIMITS, SolverParams)
 
 __all__ = [
+    'DRIVE_PARAMETERS',
     'LIVE_PARAMETERS',
     'NODE_LIMITS',
     'ParamSpec',
@@ -100,8 +101,15 @@ LIVE_PARAMETERS = ('real_time_factor', 'start_paused', 'diagnostics.period', 're
                    'record_compression', 'record_max_file_size', 'record_max_file_duration',
                    'record_min_free_space', 'replay_commands', 'threads')
 #: Run-time parameters that change what the simulation does (refused while re-simulating).
-RUN_PARAMETERS = ('max_angular_velocity', 'max_angular_acceleration', 'cmd_timeout',
-                  'open_loop_pattern', 'markers.rate')
+#: The parameters of the cone drive (an engine input when they change).
+DRIVE_PARAMETERS = ('max_angular_velocity', 'max_angular_acceleration', 'cmd_timeout',
+                    'open_loop_pattern')
+RUN_PARAMETERS = DRIVE_PARAMETERS + ('markers.rate',)
+
+
+def changes_the_run(name: str) -> bool:
+    """Tell whether a parameter changes what the simulation does (drive, feed, markers)."""
+    return name in RUN_PARAMETERS or name.startswith('feed.')
 
 
 @dataclass(frozen=True)

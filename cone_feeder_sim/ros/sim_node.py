@@ -121,8 +121,9 @@ from visualization_msgs.msg import MarkerArray
 
 from .guarded_node import GuardedNode
 from .parameters import (
-    declare, drive_from_values, engine_config_from_values, feed_from_values, init_or_exit,
-    LIVE_PARAMETERS, parameter_specs, ParamSpec, RUN_PARAMETERS, warn_unknown_parameters)
+    changes_the_run, declare, drive_from_values, DRIVE_PARAMETERS, engine_config_from_values,
+    feed_from_values, init_or_exit, LIVE_PARAMETERS, model_from_values, parameter_specs, ParamSpec,
+    warn_unknown_parameters)
 from .qos import rclpy_qos
 from .resim import load_resim_plan, ResimPlan
 from .. import __version__
@@ -138,9 +139,9 @@ from ..formats.run_recorder import RecordingLimits, RunRecorder
 from ..formats.runlog import (
     engine_config_json, engine_input_from_event, event_text, expand_record_path, failure_event,
     FORMAT_VERSION, input_event, INPUT_EVENTS, METADATA_NAME, parameter_text, to_jsonable)
-from ..formats.topics import COMMAND_QOS, MessageRecord, QosProfile, TOPICS
+from ..formats.topics import MessageRecord, QosProfile, TOPICS
 from ..physics.integrator import set_threads
-from ..physics.params import model_params_from_mapping
+from ..physics.params import ModelParams
 from ..physics.simulation import position_problems
 
 __all__ = ['SimNode', 'TopicInfo', 'main']
@@ -217,9 +218,7 @@ class SimNode(GuardedNode):
         file_param = self._declare(specs['parameter_file']).value
         if self._resim is not None:
             # every model.<key> is recorded: the model does not depend on the file any more
-            self._base_model = model_params_from_mapping({
-                name[len('model.'):]: value for name, value in self._resim.parameters.items()
-                if name.startswith('model.')})
+            self._base_model = model_from_values(self._resim.parameters, ModelParams())
         else:
             # '' = the package's table2.yaml
             self._base_model = load_model_params(file_param or None)
@@ -257,9 +256,10 @@ class SimNode(GuardedNode):
                            if values['publish_clock'] else None)
         self._pub_events = self._publisher(String, '~/events')
         self._sub_cmd = self.create_subscription(
-            Float64, 'rotation_cmd', self._on_rotation_cmd, rclpy_qos(COMMAND_QOS), raw=True)
+            Float64, 'rotation_cmd', self._on_rotation_cmd, rclpy_qos(TOPICS['rotation_cmd'].qos),
+            raw=True)
         self._sub_spawn = self.create_subscription(
-            PoseArray, 'spawn', self._on_spawn, rclpy_qos(COMMAND_QOS), raw=True)
+            PoseArray, 'spawn', self._on_spawn, rclpy_qos(TOPICS['spawn'].qos), raw=True)
         for sub, name in ((self._sub_cmd, 'rotation_cmd'), (self._sub_spawn, 'spawn')):
             spec = TOPICS[name]
             self._topics[sub.topic_name] = TopicInfo(sub.topic_name, spec.type_name, 'in',
@@ -279,8 +279,9 @@ class SimNode(GuardedNode):
         self._paused = start_paused
         self._diag_timer = self.create_timer(float(values['diagnostics.period']),
                                              self._publish_diagnostics, clock=self._steady)
-        self._flush_timer = (self.create_timer(0.25, self._on_flush_timer, clock=self._steady)
-                             if self._recorder is not None else None)
+        self._recording_timer = (
+            self.create_timer(0.25, self._check_recording, clock=self._steady)
+            if self._recorder is not None else None)
         warn_unknown_parameters(self)
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -346,15 +347,11 @@ class SimNode(GuardedNode):
         })
         return data
 
-    def _on_flush_timer(self) -> None:
+    def _check_recording(self) -> None:
+        """End a recording that stopped (its writer thread flushes and checks by itself)."""
         recorder = self._recorder
-        if recorder is None or recorder.closed:
-            return
-        if recorder.error is not None:
-            self._recording_error = str(recorder.error)
+        if recorder is not None and not recorder.closed and recorder.error is not None:
             self.close_recording()  # the simulation goes on without it
-            return
-        recorder.maybe_flush()
 
     def close_recording(self) -> None:
         """Finish the MCAP file (summary, statistics); idempotent. destroy_node() calls it."""
@@ -367,7 +364,7 @@ class SimNode(GuardedNode):
             'ticks': str(self._engine.tick_index), 'end_time': repr(self._engine.t),
             'exits': str(self._total_exits), 'failures': str(self._total_failures),
             'refused_inputs': str(self._refused)})
-        files = ', '.join(str(p) for p in recorder.paths) or str(recorder.path)
+        files = ', '.join(str(p) for p in recorder.paths)
         if recorder.error is not None:
             self._recording_error = str(recorder.error)
             self._final_log('error', f'recording stopped: {recorder.error}; '
@@ -677,8 +674,7 @@ class SimNode(GuardedNode):
 
     def _parameter_problem(self, parameters: list[Parameter]) -> SetParametersResult:
         if self._resim_active:
-            fixed = [p.name for p in parameters
-                     if p.name in RUN_PARAMETERS or p.name.startswith('feed.')]
+            fixed = [p.name for p in parameters if changes_the_run(p.name)]
             if fixed:
                 return SetParametersResult(
                     successful=False, reason=f're-simulating a recording: {", ".join(fixed)} '
@@ -693,7 +689,7 @@ class SimNode(GuardedNode):
         except ConeFeederError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         if len(self._engine.pending) >= MAX_PENDING_INPUTS and any(
-                p.name in RUN_PARAMETERS or p.name.startswith('feed.') for p in parameters):
+                changes_the_run(p.name) for p in parameters):
             return SetParametersResult(
                 successful=False, reason=f'{MAX_PENDING_INPUTS} inputs are already waiting for '
                 'the next tick')
@@ -702,9 +698,7 @@ class SimNode(GuardedNode):
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
         names = {p.name for p in parameters}
         values = self._values()
-        drive_keys = {'max_angular_velocity', 'max_angular_acceleration', 'cmd_timeout',
-                      'open_loop_pattern'}
-        drive = drive_from_values(values) if names & drive_keys else None
+        drive = drive_from_values(values) if names & set(DRIVE_PARAMETERS) else None
         feed = feed_from_values(values) if any(n.startswith('feed.') for n in names) else None
         if drive is not None or feed is not None:
             self._engine.reconfigure(drive=drive, feed=feed)
