@@ -22,7 +22,10 @@ default reversing pattern), and measures from this process:
 * start: wall time from launching the process to the first ``particles`` message;
 * real-time factor from ``/clock`` over ``--seconds`` of wall time after the cone holds N
   pieces: the whole window and the worst ``--window``-second window;
-* the node's own step and publish times and its longest tick, from ``/diagnostics``.
+* the longest wall-clock gap between two ``/clock`` messages (how long subscribers wait);
+* the node's own step and publish times, its longest tick and its longest executor
+  callback (how long its executor was blocked; absent before the worker thread), from
+  ``/diagnostics``.
 
 Prints the calibration workload first. Example::
 
@@ -114,7 +117,11 @@ def measure(pieces: int, seconds: float, window: float, rate: float,
     steps = [float(d['step time mean (ms)']) for d in diags if 'step time mean (ms)' in d]
     pubs = [float(d['publish time mean (ms)']) for d in diags if 'publish time mean (ms)' in d]
     peak = [float(d['step time max (ms)']) for d in diags if 'step time max (ms)' in d]
-    return {'start_s': started, 'rtf': rtf, 'worst_rtf': worst,
+    key = 'executor callback max (ms)'
+    blocked = [float(d[key]) for d in diags if key in d]
+    gap = max(clock[i + 1][0] - clock[i][0] for i in range(len(clock) - 1))
+    return {'start_s': started, 'rtf': rtf, 'worst_rtf': worst, 'gap_ms': 1e3 * gap,
+            'blocked_ms': max(blocked) if blocked else float('nan'),
             'step_ms': sum(steps) / max(len(steps), 1),
             'publish_ms': sum(pubs) / max(len(pubs), 1), 'step_max_ms': max(peak or [0.0]),
             'pieces': float(diags[-1]['pieces']) if diags else float('nan')}
@@ -139,12 +146,13 @@ def main() -> None:
           f'{" ".join(args.extra) or "default parameters"}, '
           f'load average {" ".join(f"{v:.2f}" for v in os.getloadavg())}')
     print(f'{"pieces":>7} {"start s":>8} {"RTF":>6} {"worst":>6} {"step ms":>8} '
-          f'{"pub ms":>7} {"max ms":>7}')
+          f'{"pub ms":>7} {"max ms":>7} {"gap ms":>7} {"exec ms":>7}')
     for count in args.pieces:
         r = measure(count, args.seconds, args.window, args.rate, args.extra, args.tree)
         print(f'{int(r["pieces"]):>7} {r["start_s"]:>8.2f} {r["rtf"]:>6.3f} '
               f'{r["worst_rtf"]:>6.3f} {r["step_ms"]:>8.2f} {r["publish_ms"]:>7.2f} '
-              f'{r["step_max_ms"]:>7.1f}', flush=True)
+              f'{r["step_max_ms"]:>7.1f} {r["gap_ms"]:>7.1f} {r["blocked_ms"]:>7.1f}',
+              flush=True)
 
 
 if __name__ == '__main__':

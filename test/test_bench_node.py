@@ -31,4 +31,5 @@ def test_benchmark_runs_and_reports_rows() -> None:
     assert proc.returncode == 0, proc.stdout + proc.stderr
     rows = [line.split() for line in proc.stdout.splitlines() if not line.startswith('#')]
     assert [int(row[0]) for row in rows] == [20, 40]
-    assert all(int(row[1]) == 3 and float(row[6]) > 0 for row in rows)
+    # ticks run: at least those asked (one more may be under way when the bench pauses)
+    assert all(int(row[1]) >= 3 and float(row[6]) > 0 for row in rows)

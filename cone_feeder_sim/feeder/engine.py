@@ -57,6 +57,7 @@ No wall clock is read here: timing belongs to the caller (the ROS node).
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 import math
+import threading
 from typing import Any
 
 import numpy as np
@@ -407,7 +408,8 @@ class FeederEngine:
     The cone feeder as a live simulation: call :meth:`tick` once per fixed step.
 
     Deterministic: the same config and the same inputs submitted before the same ticks give
-    bit-identical results. Not thread-safe: submit inputs from the thread that ticks.
+    bit-identical results. Inputs may be submitted from any thread, also while a tick runs on
+    another (they wait for the next tick); :meth:`tick` runs on one thread at a time.
     """
 
     def __init__(self, config: EngineConfig) -> None:
@@ -417,6 +419,7 @@ class FeederEngine:
         self._drive = config.drive
         self._feed = config.feed
         self._pending: list[EngineInput] = []
+        self._pending_lock = threading.Lock()
         self._refusals: list[Refusal] = []
         self._index = 0
         self._state = SimState()
@@ -534,10 +537,11 @@ class FeederEngine:
                 check_feed_fits(self._config.model, item.feed)
         elif not isinstance(item, ResetRequest):
             raise ParameterError(f'unknown engine input {item!r}')
-        if len(self._pending) >= MAX_PENDING_INPUTS:
-            raise InputError(f'{type(item).__name__} refused: {MAX_PENDING_INPUTS} inputs are '
-                             'already waiting for the next tick')
-        self._pending.append(item)
+        with self._pending_lock:
+            if len(self._pending) >= MAX_PENDING_INPUTS:
+                raise InputError(f'{type(item).__name__} refused: {MAX_PENDING_INPUTS} inputs '
+                                 'are already waiting for the next tick')
+            self._pending.append(item)
 
     def _checked_spawn(self, item: SpawnRequest) -> SpawnRequest:
         positions = as_points('spawn position', item.positions, None)
@@ -672,8 +676,9 @@ class FeederEngine:
         index = self._index
         t0 = index * dt
         t1 = (index + 1) * dt
-        applied = tuple(self._pending)
-        self._pending.clear()
+        with self._pending_lock:
+            applied = tuple(self._pending)
+            self._pending.clear()
         self._refusals = []
         spawned = []
         was_reset = False

@@ -223,12 +223,13 @@ def set_threads(count: int) -> int:
 
 
 #: Pieces are integrated in this many independent groups (piece p in group p % GROUPS), each
-#: with its own scratch arrays; the groups run on numba's threads. The result of every piece
-#: depends on nothing but its own data, so it is the same for any thread count.
+#: with its own scratch arrays; the groups run on numba's threads with the GIL released (a ROS
+#: executor keeps running beside a tick). The result of every piece depends on nothing but
+#: its own data, so it is the same for any thread count.
 GROUPS = 64
 
 
-@numba.njit(cache=True, error_model='numpy', parallel=True)
+@numba.njit(cache=True, error_model='numpy', parallel=True, nogil=True)
 def advance_batch(y, products, machine, seg_t, seg_omega, seg_domega, r_exit, h_prop, status,
                   t_event, rtol, atol, h_min, h_max, h_kink, max_steps, stats):
     """

@@ -69,6 +69,7 @@ TABLE_I_SCENARIO = 'paper_table1.yaml'
 NODE_LIMITS: dict[str, Limit] = {
     'update_rate': Limit(1.0, 1000.0, 'Hz'),
     'real_time_factor': Limit(0.0, 100.0, ''),
+    'catch_up': Limit(0.0, 60.0, 's'),
     'markers.rate': Limit(0.0, 1000.0, '1/s'),
     'diagnostics.period': Limit(0.05, 3600.0, 's'),
     'threads': Limit(0, 1024, ''),
@@ -97,9 +98,10 @@ DEFAULT_D_VALUES = (30.0, 135.0, 225.0, 750.0)
 
 #: Parameters that re-simulation does not take from the recording (wall-clock pacing,
 #: start state of the timer, the outputs of this run).
-LIVE_PARAMETERS = ('real_time_factor', 'start_paused', 'diagnostics.period', 'record_path',
-                   'record_compression', 'record_max_file_size', 'record_max_file_duration',
-                   'record_min_free_space', 'replay_commands', 'threads')
+LIVE_PARAMETERS = ('real_time_factor', 'catch_up', 'start_paused', 'diagnostics.period',
+                   'record_path', 'record_compression', 'record_max_file_size',
+                   'record_max_file_duration', 'record_min_free_space', 'replay_commands',
+                   'threads')
 #: Run-time parameters that change what the simulation does (refused while re-simulating).
 #: The parameters of the cone drive (an engine input when they change).
 DRIVE_PARAMETERS = ('max_angular_velocity', 'max_angular_acceleration', 'cmd_timeout',
@@ -261,6 +263,10 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
                   'step is dt = 1 / update_rate (Hz)', limit=NODE_LIMITS['update_rate']),
         ParamSpec('real_time_factor', 1.0, 'simulated seconds per wall-clock second; 0 runs '
                   'as fast as possible', dynamic=True, limit=NODE_LIMITS['real_time_factor']),
+        ParamSpec('catch_up', 0.5, 'wall-clock seconds the simulation may fall behind (a '
+                  'long tick) and catch up by running the next ticks sooner; beyond it the lag '
+                  'is given up and simulated time runs slower (s, 0 = never catch up)',
+                  dynamic=True, limit=NODE_LIMITS['catch_up']),
         ParamSpec('publish_clock', False, 'publish the simulation time on /clock'),
         ParamSpec('start_paused', False, 'start paused (resume with ~/pause false, or '
                   '~/step): lets subscribers connect before anything happens'),

@@ -24,13 +24,18 @@ encoded by :mod:`cone_feeder_sim.formats.cdr` and published as serialized bytes;
 and received message passes through :meth:`SimNode.add_message_hook` callbacks with its
 exact bytes (for MCAP recording).
 
-Time: the engine's step is ``dt = 1 / update_rate`` of simulated time. The tick timer runs
-on the steady clock with period ``dt / real_time_factor`` (``real_time_factor`` 0: as fast
-as possible). One timer callback runs exactly one tick: when the CPU cannot keep up, the
-timer skips the missed periods (no backlog, no catching up), simulated time runs slower
-than ``real_time_factor`` asks, and ``/diagnostics`` says so (level WARN). Header stamps are
-simulation time; ``/clock`` (when ``publish_clock``) carries the same time, never 0 (the
-first tick ends at ``dt``). The node's own clock and ``use_sim_time`` do not drive it.
+Time: the engine's step is ``dt = 1 / update_rate`` of simulated time, paced against the
+steady clock at ``real_time_factor`` (0: as fast as possible) by
+:class:`~cone_feeder_sim.ros.pacing.Pacer`. Ticks run on a worker thread (the integration
+releases the GIL and uses every core), so the executor keeps serving commands, services and
+parameters while a long tick runs; the executor publishes each tick's messages, in tick
+order, when the worker hands them over. A tick that takes longer than its period (a cone
+reversal excites every piece at once) is caught up by the following ticks as long as the
+lag stays within ``catch_up`` seconds; when the machine cannot keep up for longer, the
+excess is given up: simulated time runs slower than ``real_time_factor`` asks and
+``/diagnostics`` says so (level WARN). Header stamps are simulation time; ``/clock`` (when
+``publish_clock``) carries the same time, never 0 (the first tick ends at ``dt``). The
+node's own clock and ``use_sim_time`` do not drive it.
 
 Topics (relative names, so namespaces and remapping apply; ``frame_id`` ``feeder`` by
 default, fixed, z up, origin at the centre of the cone base):
@@ -93,6 +98,7 @@ normal end, SIGINT and SIGTERM.
 """
 
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 import datetime
 import json
@@ -120,6 +126,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from .guarded_node import GuardedNode
+from .pacing import Pacer
 from .parameters import (
     changes_the_run, declare, drive_from_values, DRIVE_PARAMETERS, engine_config_from_values,
     feed_from_values, init_or_exit, LIVE_PARAMETERS, model_from_values, parameter_specs, ParamSpec,
@@ -150,6 +157,9 @@ NODE_NAME = 'sim_node'
 #: Received messages larger than this (bytes) are not recorded whole (a million-pose spawn
 #: is 56 MB); the inputs the engine applied from them are.
 MAX_RECORDED_INPUT_BYTES = 4 * 1024 * 1024
+#: Period (s) of the tick timer when running as fast as possible (real_time_factor 0): the
+#: worker's ticks follow each other directly; the timer only restarts them after a resume.
+FAST_TIMER_PERIOD = 0.02
 
 # --------------------------------------------------------------------------- hooks
 
@@ -187,8 +197,10 @@ class _Window:
         self.step_s = 0.0
         self.step_max = 0.0
         self.publish_s = 0.0
+        self.callback_max = 0.0
         self.overruns = 0
-        self.skipped = 0
+        self.lag_max = 0.0
+        self.given_up = 0.0
         self.accepted = 0
         self.rejected = 0
 
@@ -233,17 +245,27 @@ class SimNode(GuardedNode):
             raise ParameterError(str(exc)) from exc
         self._engine = FeederEngine(engine_config_from_values(values, self._base_model))
         self._frame = str(values['frame_id'])
-        self._rtf = float(values['real_time_factor'])
+        self._pacer = Pacer(self._engine.dt, float(values['real_time_factor']),
+                            float(values['catch_up']))
+        self._anchored = False  # the pacer is anchored at the first timer callback
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='sim_tick')
+        self._job: Future[list[tuple[TickResult, float]]] | None = None
         self._markers = MarkerSchedule(float(values['markers.rate']))
+        #: marker rate changes (from tick index, rate): the worker may be ticks ahead of the
+        #: published ones, so a change takes effect from the tick its event names
+        self._marker_rates: list[tuple[int, float]] = []
         self._paused = False
         self._total_exits = 0
         self._total_failures = 0
         self._refused = 0
         self._last_tick: TickResult | None = None
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._last_tick_wall: float | None = None
         self._window = _Window(time.perf_counter(), self._engine.t)
         self._timing = [0, 0.0, 0.0]  # ticks, step s, publish s since the start
+        # the worker may be ticks ahead: the node's time is that of the last published tick
+        # (stamps of events, received messages and diagnostics, so log times never go back)
+        self._published_t = self._engine.t
+        self._published_index = self._engine.tick_index
 
         self._pub_particles = self._publisher(PoseArray, 'particles')
         self._pub_states = self._publisher(PointCloud2, 'particle_states')
@@ -268,13 +290,14 @@ class SimNode(GuardedNode):
         self._srv_reset = self.create_service(Trigger, '~/reset', self._on_reset)
         self._srv_pause = self.create_service(SetBool, '~/pause', self._on_pause)
         self._srv_step = self.create_service(Trigger, '~/step', self._on_step)
+        self._job_done = self.create_guard_condition(self._on_job_done)
 
         self._marker_builder = MarkerBuilder(self._engine.model, self._frame, self._codec)
         self._start_recording(values)
         if self._resim is not None:
             self._check_resim_config()
         start_paused = bool(values['start_paused'])
-        self._tick_timer = self.create_timer(self._tick_period(), self._on_timer,
+        self._tick_timer = self.create_timer(self._timer_period(), self._on_timer,
                                              clock=self._steady, autostart=not start_paused)
         self._paused = start_paused
         self._diag_timer = self.create_timer(float(values['diagnostics.period']),
@@ -287,7 +310,7 @@ class SimNode(GuardedNode):
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.get_logger().info(
             f'simulating {self._engine.piece_count} pieces, dt = {self._engine.dt:g} s, '
-            f'real_time_factor = {self._rtf:g}, feed {self._engine.feed.rate:g} pieces/s')
+            f'real_time_factor = {self._pacer.rtf:g}, feed {self._engine.feed.rate:g} pieces/s')
         if self._resim is not None and self._resim.ticks == 0:
             self._finish_resim()
 
@@ -358,6 +381,7 @@ class SimNode(GuardedNode):
         recorder = getattr(self, '_recorder', None)
         if recorder is None or recorder.closed:
             return
+        self._finish_job()  # its ticks belong to the recording
         if recorder.hook in self._hooks:
             self.remove_message_hook(recorder.hook)
         recorder.close(end_metadata={
@@ -385,8 +409,12 @@ class SimNode(GuardedNode):
         return None if self._recorder is None else self._recorder.path
 
     def destroy_node(self) -> None:
-        """Finish the recording, then destroy the node's handles."""
+        """Finish the running tick and the recording, then destroy the node's handles."""
         try:
+            worker = getattr(self, '_worker', None)
+            if worker is not None:
+                self._finish_job()
+                worker.shutdown(wait=True)
             self.close_recording()
         finally:
             super().destroy_node()
@@ -414,16 +442,21 @@ class SimNode(GuardedNode):
         """Tell whether the node is re-simulating a recording (until its last tick)."""
         return self._resim_active
 
-    def _apply_recorded(self) -> None:
-        """Submit the recorded inputs of the next tick (re-simulation)."""
+    def _submit_recorded(self) -> None:
+        """Submit the recorded inputs of the next tick (re-simulation; worker thread)."""
         plan = self._resim
         assert plan is not None
         for event in plan.events.get(self._engine.tick_index, ()):
-            kind = event.get('event')
-            if kind in INPUT_EVENTS:
+            if event.get('event') in INPUT_EVENTS:
                 self._engine.submit(engine_input_from_event(event))
-            elif kind == 'parameters' and 'markers.rate' in event.get('values', {}):
-                self._markers.rate = float(event['values']['markers.rate'])
+
+    def _recorded_marker_rates(self, index: int) -> None:
+        """Queue the recorded marker rate changes of tick ``index`` (re-simulation)."""
+        plan = self._resim
+        assert plan is not None
+        for event in plan.events.get(index, ()):
+            if event.get('event') == 'parameters' and 'markers.rate' in event.get('values', {}):
+                self._marker_rates.append((index, float(event['values']['markers.rate'])))
 
     def _finish_resim(self) -> None:
         self._resim_active = False
@@ -471,12 +504,14 @@ class SimNode(GuardedNode):
         # get_parameter_or: an empty list in a parameter file leaves an array NOT_SET
         return {name: self.get_parameter_or(name).value for name in self._specs}
 
-    def _tick_period(self) -> float:
-        return 0.0 if self._rtf == 0.0 else self._engine.dt / self._rtf
+    def _timer_period(self) -> float:
+        # as fast as possible, the worker chains its hand-overs; the timer only restarts them
+        return self._pacer.period or FAST_TIMER_PERIOD
 
     def _publish(self, out: '_Output', message: dict[str, Any], stamp_ns: int) -> None:
         data = out.encode(message)
-        out.publisher.publish(data)
+        if self.context.ok():  # after a signal, the last ticks are still recorded
+            out.publisher.publish(data)
         if self._hooks:
             self._emit(MessageRecord('out', out.topic, out.type_name, data, stamp_ns,
                                      time.time_ns()))
@@ -522,7 +557,8 @@ class SimNode(GuardedNode):
         return self._last_tick
 
     def _now_ns(self) -> int:
-        return stamp_ns(self._engine.t)
+        """Return the node's time (ns): that of the last published tick."""
+        return stamp_ns(self._published_t)
 
     def _publish_event(self, event: dict[str, Any], time_ns: int | None = None) -> None:
         """Publish an event on ~/events (and so record it)."""
@@ -530,8 +566,8 @@ class SimNode(GuardedNode):
                       self._now_ns() if time_ns is None else time_ns)
 
     def _node_event(self, kind: str, **fields: Any) -> None:
-        self._publish_event({'event': kind, 'tick': self._engine.tick_index,
-                             't': self._engine.t, **fields})
+        self._publish_event({'event': kind, 'tick': self._published_index,
+                             't': self._published_t, **fields})
 
     # ------------------------------------------------------------------ inputs
 
@@ -646,12 +682,13 @@ class SimNode(GuardedNode):
                 return 'already paused'
             self._tick_timer.cancel()
             self._paused = True
+            self._finish_job()
             self._node_event('pause')
             return f'paused at t = {self._engine.t:.6f} s'
         if not self._paused:
             return 'already running'
         self._paused = False
-        self._last_tick_wall = None
+        self._anchored = False
         self._window = _Window(time.perf_counter(), self._engine.t)
         self._tick_timer.reset()
         self._node_event('resume')
@@ -659,8 +696,13 @@ class SimNode(GuardedNode):
 
     def step(self) -> TickResult:
         """Run one tick now and publish it (what ~/step does while paused)."""
+        self._finish_job()
         self._node_event('step')
-        return self._run_tick()
+        result = self._tick_once()
+        self._publish_results([result])
+        if self._resim_active and self._engine.tick_index >= self._resim.ticks:
+            self._finish_resim()
+        return result[0]
 
     # ------------------------------------------------------------------ parameters
 
@@ -703,63 +745,120 @@ class SimNode(GuardedNode):
         if drive is not None or feed is not None:
             self._engine.reconfigure(drive=drive, feed=feed)
         if 'real_time_factor' in names:
-            self._rtf = float(values['real_time_factor'])
-            self._tick_timer.timer_period_ns = int(round(self._tick_period() * 1e9))
-            self._last_tick_wall = None
+            self._pacer.rtf = float(values['real_time_factor'])
+            self._tick_timer.timer_period_ns = int(round(self._timer_period() * 1e9))
+            self._anchored = False
             self._window = _Window(time.perf_counter(), self._engine.t)
+        if 'catch_up' in names:
+            self._pacer.catch_up = float(values['catch_up'])
+        index = self._engine.tick_index  # the next tick the worker starts
         if 'markers.rate' in names:
-            self._markers.rate = float(values['markers.rate'])
+            self._marker_rates.append((index, float(values['markers.rate'])))
         if 'diagnostics.period' in names:
             self._diag_timer.timer_period_ns = int(round(values['diagnostics.period'] * 1e9))
-        self._node_event('parameters', values={p.name: p.value for p in parameters})
+        self._node_event('parameters', tick=index, values={p.name: p.value for p in parameters})
 
     # ------------------------------------------------------------------ the tick
 
     def _on_timer(self) -> None:
-        now = time.perf_counter()
-        period = self._tick_period()
-        if self._last_tick_wall is not None and period > 0.0:
-            missed = int((now - self._last_tick_wall) / period + 0.5) - 1
-            if missed > 0:
-                self._window.skipped += missed
-        self._last_tick_wall = now
-        self._run_tick()
-        if period > 0.0 and time.perf_counter() - now > period:
-            self._window.overruns += 1
+        if self._job is None and not self._paused:
+            self._start_job()
 
-    def _run_tick(self) -> TickResult:
+    def _start_job(self) -> None:
+        """Hand the ticks that are due to the worker thread (executor thread)."""
+        begin = time.perf_counter()
+        engine = self._engine
+        if not self._anchored:  # (re)started: the first tick is due now
+            self._pacer.restart(begin - self._pacer.period, engine.t)
+            self._anchored = True
+        due = self._pacer.due(begin, engine.t)
+        window = self._window
+        window.given_up += due.given_up
+        window.lag_max = max(window.lag_max, due.lag)
+        count = due.ticks
+        if self._resim_active:
+            count = min(count, self._resim.ticks - engine.tick_index)
+        if count > 0:  # the ticks due, within one period of work
+            self._job = self._worker.submit(self._work, count, begin + self._pacer.period)
+
+    def _work(self, count: int, deadline: float) -> list[tuple[TickResult, float]]:
+        """Run up to ``count`` ticks, stopping after ``deadline`` (worker thread)."""
+        results = []
+        try:
+            for _ in range(count):
+                results.append(self._tick_once())
+                if time.perf_counter() >= deadline:
+                    break
+        finally:
+            self._job_done.trigger()  # the executor publishes them
+        return results
+
+    def _tick_once(self) -> tuple[TickResult, float]:
+        """Run one engine tick; return it with its wall-clock duration (s)."""
         start = time.perf_counter()
         if self._resim_active:
-            self._apply_recorded()
+            self._submit_recorded()
         result = self._engine.tick()
-        stepped = time.perf_counter()
-        self._publish_tick(result)
-        done = time.perf_counter()
-        window = self._window
-        window.ticks += 1
-        window.step_s += stepped - start
-        window.step_max = max(window.step_max, stepped - start)
-        window.publish_s += done - stepped
-        self._timing[0] += 1
-        self._timing[1] += stepped - start
-        self._timing[2] += done - stepped
-        window.accepted += result.stats.accepted
-        window.rejected += result.stats.rejected
-        self._last_tick = result
-        self._total_exits += len(result.exits)
-        self._total_failures += len(result.failures)
-        for failure in result.failures:
-            self.get_logger().warning(
-                f'piece {failure.particle_id} removed at t = {failure.t:.6f} s: '
-                f'{failure.reason} (at {failure.position})')
-            self._publish_event(failure_event(result.index, failure), stamp_ns(failure.t))
-        for refusal in result.refusals:
-            self._refuse(refusal.kind, refusal.count, refusal.reason)
-        if result.reset:
-            self._markers.restart()
-        if self._resim_active and self._engine.tick_index >= self._resim.ticks:
+        return result, time.perf_counter() - start
+
+    def _on_job_done(self) -> None:
+        """Start the next ticks if due, then publish the finished ones (executor)."""
+        job = self._job
+        if job is None or not job.done():
+            return  # already handed over by _finish_job
+        begin = time.perf_counter()
+        self._job = None
+        results = job.result()
+        if not self._paused:
+            self._start_job()  # the worker ticks on while these are published
+        self._publish_results(results)
+        if (self._resim_active and self._job is None
+                and self._engine.tick_index >= self._resim.ticks):
             self._finish_resim()
-        return result
+        self._window.callback_max = max(self._window.callback_max, time.perf_counter() - begin)
+
+    def _finish_job(self) -> None:
+        """Wait for the worker's running ticks and publish them (pause, step, shutdown)."""
+        job, self._job = self._job, None
+        if job is not None:
+            self._publish_results(job.result())
+
+    def _publish_results(self, results: list[tuple[TickResult, float]]) -> None:
+        """Publish and count finished ticks, in tick order (executor thread)."""
+        period = self._pacer.period
+        for result, seconds in results:
+            stepped = time.perf_counter()
+            if self._resim is not None:
+                self._recorded_marker_rates(result.index)
+            while self._marker_rates and self._marker_rates[0][0] <= result.index:
+                self._markers.rate = self._marker_rates.pop(0)[1]
+            self._publish_tick(result)
+            self._published_t, self._published_index = result.t, result.index + 1
+            done = time.perf_counter()
+            window = self._window
+            window.ticks += 1
+            window.step_s += seconds
+            window.step_max = max(window.step_max, seconds)
+            window.publish_s += done - stepped
+            if period > 0.0 and seconds > period:
+                window.overruns += 1
+            self._timing[0] += 1
+            self._timing[1] += seconds
+            self._timing[2] += done - stepped
+            window.accepted += result.stats.accepted
+            window.rejected += result.stats.rejected
+            self._last_tick = result
+            self._total_exits += len(result.exits)
+            self._total_failures += len(result.failures)
+            for failure in result.failures:
+                self.get_logger().warning(
+                    f'piece {failure.particle_id} removed at t = {failure.t:.6f} s: '
+                    f'{failure.reason} (at {failure.position})')
+                self._publish_event(failure_event(result.index, failure), stamp_ns(failure.t))
+            for refusal in result.refusals:
+                self._refuse(refusal.kind, refusal.count, refusal.reason)
+            if result.reset:
+                self._markers.restart()
 
     def _publish_tick(self, res: TickResult) -> None:
         if res.applied:
@@ -809,31 +908,35 @@ class SimNode(GuardedNode):
         achieved = sim / wall if wall > 0 else 0.0
         ticks = max(window.ticks, 1)
         level = 0
+        rtf = self._pacer.rtf
         if self._paused:
             message = f'paused at t = {self._engine.t:.3f} s'
-        elif self._rtf == 0.0:
+        elif rtf == 0.0:
             message = f'running as fast as possible: real-time factor {achieved:.2f}'
-        elif window.ticks and achieved < 0.9 * self._rtf:
+        elif window.ticks and (window.given_up > 0.0 or achieved < 0.9 * rtf):
             level = 1
-            message = (f'cannot keep up: real-time factor {achieved:.2f} < {self._rtf:g} '
-                       f'(tick {1e3 * (window.step_s + window.publish_s) / ticks:.3g} ms, '
-                       f'period {1e3 * self._tick_period():.3g} ms); simulation time runs '
-                       'slower, ticks are not caught up')
+            message = (f'cannot keep up: real-time factor {achieved:.2f} < {rtf:g} '
+                       f'(tick {1e3 * window.step_s / ticks:.3g} ms, longest '
+                       f'{1e3 * window.step_max:.3g} ms, period {1e3 * self._pacer.period:.3g} '
+                       f'ms); {window.given_up:.3g} s beyond catch_up = '
+                       f'{self._pacer.catch_up:g} s given up: simulation time runs slower')
         else:
-            message = f'real-time factor {achieved:.2f} (target {self._rtf:g})'
+            message = f'real-time factor {achieved:.2f} (target {rtf:g})'
         res = self._last_tick
         values = {
             'simulation time (s)': f'{self._engine.t:.6f}',
             'paused': str(self._paused),
             'real-time factor (achieved)': f'{achieved:.4f}',
-            'real-time factor (target)': f'{self._rtf:g}',
+            'real-time factor (target)': f'{rtf:g}',
             'update rate (Hz)': f'{1.0 / self._engine.dt:g}',
             'ticks in window': str(window.ticks),
             'step time mean (ms)': f'{1e3 * window.step_s / ticks:.3f}',
             'step time max (ms)': f'{1e3 * window.step_max:.3f}',
             'publish time mean (ms)': f'{1e3 * window.publish_s / ticks:.3f}',
             'overruns (ticks longer than the period)': str(window.overruns),
-            'skipped periods': str(window.skipped),
+            'lag behind the wall clock max (ms)': f'{1e3 * window.lag_max:.3f}',
+            'time given up (s)': f'{window.given_up:.3f}',
+            'executor callback max (ms)': f'{1e3 * window.callback_max:.3f}',
             'pieces': str(self._engine.piece_count),
             'accepted steps': str(window.accepted),
             'rejected steps': str(window.rejected),
@@ -847,7 +950,7 @@ class SimNode(GuardedNode):
             'drive mode': res.mode if res is not None else 'not started',
         }
         message_dict = {
-            'header': {'stamp': stamp(self._engine.t), 'frame_id': ''},
+            'header': {'stamp': stamp(self._published_t), 'frame_id': ''},
             'status': [{'level': level,
                         'name': f'{self.get_fully_qualified_name()}: simulation',
                         'message': message, 'hardware_id': 'cone_feeder',
