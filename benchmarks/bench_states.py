@@ -1,0 +1,124 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Benchmark: the engine's cost in each state of the model, at several piece counts.
+
+A headless :class:`FeederEngine` (the node's engine, no ROS), 50 Hz ticks, every core; for
+each state and piece count N it prints particle-seconds per CPU-second, integration steps
+per particle-second, the real-time capacity (simulated seconds per wall second with N
+pieces) and the median and longest tick. The states:
+
+* ``resting``: pieces resting on a stationary cone (the cheapest state);
+* ``turning``: pieces resting on a cone turning at 2 rad/s (the self-excited friction
+  oscillation of sticking pieces, see doc/model.md);
+* ``dropped``: pieces released at rest 2 cm above a stationary cone (fall, landing,
+  settling: the first 0.5 s);
+* ``reversing``: the default reversing pattern (+-8 rad/s, 2 s each way) with the feed
+  keeping N pieces on the cone (exits replaced as they happen), one pattern period.
+
+Pieces start at seeded random places with rho in [0.03, 0.15] m. The calibration workload
+is printed first. Example::
+
+    .venv/bin/python benchmarks/bench_states.py --pieces 20 150 2000 5000
+"""
+
+import argparse
+import statistics
+import time
+
+from calibration import calibration_line
+from cone_feeder_sim.feeder.engine import (
+    DriveParams, EngineConfig, FeederEngine, FeedParams)
+from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.simulation import resting_height
+import numba
+import numpy as np
+
+STATES = ('resting', 'turning', 'dropped', 'reversing')
+#: Default reversing pattern of sim_node (s, rad/s).
+PATTERN = ((2.0, -8.0), (2.0, 8.0))
+
+
+def places(count: int, lift: float) -> np.ndarray:
+    """Return (count, 3) world positions (m): resting on the cone, raised by ``lift`` m."""
+    model = ModelParams()
+    rng = np.random.default_rng(7)
+    rho = np.sqrt(rng.uniform(0.03 ** 2, 0.15 ** 2, count))
+    theta = rng.uniform(0.0, 2.0 * np.pi, count)
+    x, y = rho * np.cos(theta), rho * np.sin(theta)
+    z = np.array([resting_height(model, model.product, a, b) for a, b in zip(x, y)]) + lift
+    return np.column_stack([x, y, z])
+
+
+def engine_for(state: str, count: int) -> tuple[FeederEngine, int, int]:
+    """Return the engine in ``state`` with ``count`` pieces, warm-up and measured ticks."""
+    if state == 'reversing':
+        feed = FeedParams(rate=max(500.0, count), max_pieces=count)
+        engine = FeederEngine(EngineConfig(drive=DriveParams(pattern=PATTERN), feed=feed))
+        fill = int(np.ceil(count / feed.rate / engine.dt)) + 100  # fill, then 2 s in
+        return engine, fill, int(round(4.0 / engine.dt))
+    engine = FeederEngine(EngineConfig(drive=DriveParams(cmd_timeout=0.0),
+                                       feed=FeedParams(max_pieces=max(count, 1))))
+    if state == 'dropped':
+        engine.spawn(places(count, 0.02), velocities=np.zeros((count, 3)))
+        return engine, 0, 25
+    engine.spawn(places(count, 0.0))  # carried: at rest on the (resting) cone
+    engine.command(2.0 if state == 'turning' else 0.0)
+    return engine, 50, 50  # 1 s to settle (and spin up), 1 s measured
+
+
+def measure(state: str, count: int) -> dict[str, float]:
+    """Run one state with ``count`` pieces; return the figures."""
+    engine, warm, ticks = engine_for(state, count)
+    for _ in range(warm):
+        engine.tick()
+    durations, piece_seconds, steps = [], 0.0, 0
+    cpu0 = time.process_time()
+    wall0 = time.perf_counter()
+    for _ in range(ticks):
+        start = time.perf_counter()
+        result = engine.tick()
+        durations.append(time.perf_counter() - start)
+        piece_seconds += engine.dt * (len(result.ids) + len(result.exits)
+                                      + len(result.failures))
+        steps += result.stats.accepted + result.stats.rejected
+    wall = time.perf_counter() - wall0
+    cpu = time.process_time() - cpu0
+    return {'pieces': engine.piece_count, 'per_cpu': piece_seconds / cpu,
+            'steps': steps / max(piece_seconds, 1e-12), 'capacity': ticks * engine.dt / wall,
+            'median_ms': 1e3 * statistics.median(durations), 'max_ms': 1e3 * max(durations)}
+
+
+def main() -> None:
+    """Print the calibration and one row per state and piece count."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--pieces', type=int, nargs='+', default=[20, 150, 2000, 5000])
+    parser.add_argument('--states', nargs='+', choices=STATES, default=list(STATES))
+    args = parser.parse_args()
+    print(calibration_line())
+    print(f'# 50 Hz ticks, {numba.get_num_threads()} threads; capacity = simulated s per '
+          'wall s; pc-s/CPU-s = particle-seconds per CPU-second (all threads)')
+    print(f'{"state":>10} {"N":>6} {"pc-s/CPU-s":>11} {"steps/pc-s":>11} {"capacity":>9} '
+          f'{"median ms":>10} {"max ms":>8}')
+    for state in args.states:
+        for count in args.pieces:
+            r = measure(state, count)
+            print(f'{state:>10} {int(r["pieces"]):>6} {r["per_cpu"]:>11.0f} '
+                  f'{r["steps"]:>11.0f} {r["capacity"]:>9.2f} {r["median_ms"]:>10.2f} '
+                  f'{r["max_ms"]:>8.1f}', flush=True)
+
+
+if __name__ == '__main__':
+    main()
