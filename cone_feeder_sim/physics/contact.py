@@ -23,13 +23,14 @@ applied to d, with the pair's radii summed: the activation
     r_t = 2 artanh(r_a) / (S0 - S_c),      S0 = s0_i + s0_j, S_c = s_c_i + s_c_j,
 
 is (1 + r_a)/2 where the pieces are compressed to S_c and (1 - r_a)/2 where they just
-touch (d = S0), as on the cone (eq. 32), and the dissipative constraint force
+touch (d = S0), as on the cone (eq. 32). The dissipative constraint force
 F_c = r_f (1 - tanh(r_d v_n)) / 2 acts along the line of centres n = (x_i - x_j) / d, with
-v_n the normal relative velocity (> 0 separating). The normal force is N = R_a F_c. Adhesion pulls the pieces together with
-A = f_po sech^2(r_t (d - S0)), largest (f_po, the pull-off parameter) where they just
-touch. Friction is the paper's static friction map (eqs. 6-10) of the tangential relative
-velocity with the contact's normal force N. The coefficients r_a, r_d, r_f, d, mu_C, mu_S,
-v_C, v_S of a pair are the means of the two pieces' values.
+v_n the normal relative velocity (> 0 separating); the normal force is N = R_a F_c.
+Adhesion pulls the pieces together with A = f_po sech^2(r_t (d - S0)), largest (f_po, the
+pull-off parameter) where they just touch. Friction is the paper's static friction map
+(eqs. 6-10) of the tangential relative velocity with the contact's normal force N. The
+coefficients r_a, r_d, r_f, d, mu_C, mu_S, v_C, v_S of a pair are the means of the two
+pieces' values.
 
 Forces are returned for piece i; piece j gets the opposite force (equal and opposite by
 construction: swapping i and j flips n, v_n keeps its value, the tangential velocity flips).
