@@ -112,3 +112,23 @@ def test_adhesion_pulls_at_touch_with_the_pull_off_force() -> None:
     assert far[2] == pytest.approx(
         0.5 * (1.0 - math.tanh(r_t * (2.0 * p.s0 + 0.01 - 0.0375))) * 60.0
         - 2.0 / math.cosh(r_t * 0.01) ** 2, rel=1e-9)
+
+
+def test_the_kernel_matches_the_independent_reference() -> None:
+    from reference_contacts import reference_pair_force
+    from reference_model import table2_params
+    rng = np.random.default_rng(11)
+    p_i, p_j = table2_params(1), table2_params(5, m=0.2, s0=0.03)
+    row_i = product_row(ProductParams(d=p_i['d']))
+    row_j = product_row(ProductParams(d=p_j['d'], m=0.2, s0=0.03))
+    for _ in range(100):
+        q_i, q_j = rng.normal(0.0, 0.025, 3), rng.normal(0.0, 0.025, 3)
+        qd_i, qd_j = rng.normal(0.0, 0.05, 3), rng.normal(0.0, 0.05, 3)
+        omega = rng.uniform(-8.0, 8.0)
+        expected = reference_pair_force(q_i, qd_i, p_i, q_j, qd_j, p_j, omega, 0.4)
+        # the kernel takes velocities relative to the turning cone (cone axes = world
+        # axes at cone angle 0)
+        w_i = qd_i - omega * np.array([-q_i[1], q_i[0], 0.0])
+        w_j = qd_j - omega * np.array([-q_j[1], q_j[0], 0.0])
+        got = pair_force_py(q_i, w_i, row_i, q_j, w_j, row_j, 0.4)
+        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
