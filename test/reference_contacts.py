@@ -96,11 +96,73 @@ def crowd_trajectory(params: list[dict[str, Any]], y0: np.ndarray, table: Any,
     Integrate the coupled pieces with Radau from t = 0 to t_end (no exits).
 
     params: one parameter dict per piece (reference_model.table2_params); y0 (n, 9) world
-    states; table the rotation table [[t, omega], ...] (omega linear in between; the run is
-    not split at its breakpoints, so give tables without kinks inside (0, t_end) or short
-    runs). Returns scipy's OdeResult; its y has shape (9 n, len(t)).
+    states; table the rotation table [[t, omega], ...], omega linear in between (the run
+    restarts at each breakpoint, so no kink is stepped over); t_eval the output times
+    (default: t_end). Returns an object with t and y, y of shape (9 n, len(t)), and status.
     """
     atol = np.tile([1e-12] * 6 + [1e-10] * 3, len(params))
-    return solve_ivp(lambda t, y: crowd_rhs(y, params, omega_of_t(table, t), pull_off),
-                     (0.0, t_end), np.asarray(y0, dtype=float).reshape(-1), method='Radau',
-                     rtol=rtol, atol=atol, t_eval=t_eval, dense_output=True)
+    t_out = np.array([t_end] if t_eval is None else t_eval, dtype=float)
+    cuts = sorted({0.0, t_end} | {float(t) for t, _ in table if 0.0 < t < t_end})
+    y = np.asarray(y0, dtype=float).reshape(-1)
+    found: dict[float, np.ndarray] = {0.0: y.copy()}
+    status = 0
+    for t_a, t_b in zip(cuts[:-1], cuts[1:]):
+        points = sorted({float(t) for t in t_out if t_a < t <= t_b} | {t_b})
+        sol = solve_ivp(lambda t, yy: crowd_rhs(yy, params, omega_of_t(table, t), pull_off),
+                        (t_a, t_b), y, method='Radau', rtol=rtol, atol=atol, t_eval=points)
+        status = min(status, sol.status)
+        found.update({float(t): sol.y[:, k] for k, t in enumerate(sol.t)})
+        y = sol.y[:, -1]
+    result = type('CrowdSolution', (), {})()
+    result.t = t_out
+    result.y = np.column_stack([found[float(t)] for t in t_out])
+    result.status = status
+    return result
+
+
+def crowd_exits(params: list[dict[str, Any]], y0: np.ndarray, table: Any, t_end: float,
+                pull_off: float = 0.0, rtol: float = 1e-10) -> dict[int, tuple[float, float]]:
+    """
+    Integrate the coupled pieces until t_end, taking out each piece that crosses the rim.
+
+    Returns {piece index: (exit time s, exit angle deg in [0, 360))}. The run restarts at
+    every exit with the remaining pieces (a terminal event per piece) and at every
+    breakpoint of the rotation table.
+    """
+    from reference_model import cone_geometry
+    r, _ = cone_geometry(params[0])
+    alive = list(range(len(params)))
+    y = {i: np.asarray(y0[i], dtype=float) for i in alive}
+    exits: dict[int, tuple[float, float]] = {}
+    breaks = sorted({float(t) for t, _ in table if 0.0 < t < t_end} | {t_end})
+    t = 0.0
+    while alive and t < t_end:
+        t_stop = next(b for b in breaks if b > t)
+        own = [params[i] for i in alive]
+
+        def rim(tt: float, yy: np.ndarray, k: int) -> float:
+            return math.hypot(yy[9 * k], yy[9 * k + 1]) - r
+
+        events = []
+        for k in range(len(alive)):
+            def event(tt: float, yy: np.ndarray, k: int = k) -> float:
+                return rim(tt, yy, k)
+            event.terminal = True  # type: ignore[attr-defined]
+            event.direction = 1.0  # type: ignore[attr-defined]
+            events.append(event)
+        atol = np.tile([1e-12] * 6 + [1e-10] * 3, len(alive))
+        sol = solve_ivp(lambda tt, yy, own=own: crowd_rhs(yy, own, omega_of_t(table, tt),
+                                                          pull_off),
+                        (t, t_stop), np.concatenate([y[i] for i in alive]), method='Radau',
+                        rtol=rtol, atol=atol, events=events)
+        assert sol.status >= 0, sol.message
+        t = float(sol.t[-1])
+        state = sol.y[:, -1].reshape(len(alive), 9)
+        for k, i in enumerate(alive):
+            y[i] = state[k]
+        if sol.status == 1:
+            k = next(k for k, ev in enumerate(sol.t_events) if len(ev))
+            i = alive[k]
+            exits[i] = (t, math.degrees(math.atan2(y[i][1], y[i][0])) % 360.0)
+            alive.remove(i)
+    return exits

@@ -27,7 +27,7 @@ STILL = [[0.0, 0.0], [100.0, 0.0]]
 
 
 def head_on(v: float, t_end: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
-    """Two default pieces 6 cm apart, 20 m above the cone, one closing at v (m/s)."""
+    """Collide two default pieces 6 cm apart, 20 m above the cone, one closing at v (m/s)."""
     y0 = np.zeros((2, 9))
     y0[0, :3] = [-0.06, 0.0, 20.0]
     y0[0, 3] = v

@@ -142,6 +142,11 @@ SOLVER_LIMITS: dict[str, Limit] = {
     'max_steps': Limit(1, 10 ** 12, ''),
 }
 
+#: Ranges of the piece-piece contact settings (InteractionParams).
+INTERACTION_LIMITS: dict[str, Limit] = {
+    'pull_off': Limit(0.0, 1.0e3, 'N'),
+}
+
 NORMAL_FORCE_CHOICES = ('newton', 'literal')
 FRICTION_DIRECTION_CHOICES = ('full', 'tangential')
 CHANNEL_NUMBERING_CHOICES = ('clockwise', 'counter_clockwise')
@@ -281,6 +286,31 @@ class ChannelLayout:
         return start, start + self.width
 
 
+@dataclass(frozen=True)
+class InteractionParams:
+    """
+    Contact between pieces (doc/model.md, "Pieces that touch").
+
+    enabled: pieces push, rub and stick to each other (off: each piece moves alone, the
+    paper's model); pull_off (N): amplitude of the adhesion between two pieces, the force
+    that holds two just-touching pieces together. The default 0.05 N is an assumption (the
+    paper gives no value): raw meat sticks to meat weakly, about 4 % of the weight of a
+    default 0.125-kg piece.
+    """
+
+    enabled: bool = False
+    pull_off: float = 0.05
+
+    def __post_init__(self) -> None:
+        """Validate the fields."""
+        if not isinstance(self.enabled, (bool, np.bool_)):
+            raise ParameterError(f"parameter 'interactions.enabled' must be true or false, "
+                                 f'got {self.enabled!r}')
+        object.__setattr__(self, 'enabled', bool(self.enabled))
+        object.__setattr__(self, 'pull_off', check_number(
+            'interactions.pull_off', self.pull_off, INTERACTION_LIMITS['pull_off']))
+
+
 # Layout of the global (machine and model) array used by the kernel.
 G_R, G_H, G_K, G_G, G_EPS, G_TIP_EPS, G_LITERAL, G_TANGENTIAL = range(8)
 GLOBAL_WIDTH = 8
@@ -294,7 +324,8 @@ class ModelParams:
     g (m/s^2); cone_diameter (m); cone_tilt (deg); epsilon (m/s) of eq. 4; tip_epsilon (m)
     regularises rho near the cone tip, rho = sqrt(x^2 + y^2 + tip_epsilon^2);
     normal_force: 'newton' (N = R_a*F_c in friction, default) or 'literal' (N/r_f);
-    friction_direction: 'full' (3-D v_dif, default) or 'tangential' (normal part removed).
+    friction_direction: 'full' (3-D v_dif, default) or 'tangential' (normal part removed);
+    interactions: contact between pieces (off by default: the paper's model).
     """
 
     product: ProductParams = ProductParams()
@@ -306,6 +337,7 @@ class ModelParams:
     normal_force: str = 'newton'
     friction_direction: str = 'full'
     channels: ChannelLayout = ChannelLayout()
+    interactions: InteractionParams = InteractionParams()
 
     def __post_init__(self) -> None:
         """Validate every field."""

@@ -33,8 +33,12 @@ import numpy as np
 from .integrator import (
     ACTIVE, advance_batch, EXITED, FAILED, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW,
     REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED, STAT_WIDTH)
+from .islands import advance_island, islands_of
 from .model import STATE_SIZE
-from .params import ModelParams, P_M, product_row, PRODUCT_WIDTH, ProductParams, SolverParams
+from .neighbours import contact_pairs
+from .params import (
+    ModelParams, P_M, P_R_A, P_S0, P_SC_RATIO, product_row, PRODUCT_WIDTH, ProductParams,
+    SolverParams)
 from .rotation import rotate_z, RotationProfile
 from ..errors import ScenarioError
 
@@ -298,7 +302,11 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     t_event = np.zeros(n)
     stats = np.zeros((n, STAT_WIDTH), dtype=np.int64)
     solver = params.solver
-    if n:
+    interactions = params.model.interactions
+    if interactions.enabled and n > 1:
+        _advance_with_contacts(state, params, profile, t1, y, step_size, status, t_event,
+                               stats)
+    elif n:
         advance_batch(y, state.products, params.global_row, seg_t, seg_omega, seg_domega,
                       params.model.r, step_size, status, t_event, solver.rtol, params.atol,
                       solver.h_min, solver.h_max, solver.h_init, solver.max_steps,
@@ -314,6 +322,94 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     step_stats = StepStats(accepted=int(stats[:, STAT_ACCEPTED].sum()),
                            rejected=int(stats[:, STAT_REJECTED].sum()), particles=n)
     return StepResult(state=new_state, exits=exits, failures=failures, stats=step_stats)
+
+
+#: The pair force is below this fraction of r_f beyond the contact reach (activation 1e-6).
+CONTACT_CUTOFF_ACTIVATION = 1.0e-6
+
+
+def contact_reach(products: np.ndarray) -> np.ndarray:
+    """
+    Return each piece's contact reach (m), shape (N,), from its product rows (N, W).
+
+    Two like pieces interact within the sum of their reaches: the centre distance where
+    the pair's activation falls to CONTACT_CUTOFF_ACTIVATION; beyond it the pair force is
+    below 1e-6 r_f and the pair is left out.
+    """
+    s0 = products[:, P_S0]
+    s_c = s0 * products[:, P_SC_RATIO]
+    tail = np.arctanh(1.0 - 2.0 * CONTACT_CUTOFF_ACTIVATION) / (
+        2.0 * np.arctanh(products[:, P_R_A]))
+    return 0.5 * (s0 + s_c) + tail * (s0 - s_c)
+
+
+def _advance_with_contacts(state: SimState, params: SimParams, profile: RotationProfile,
+                           t1: float, y: np.ndarray, step_size: np.ndarray,
+                           status: np.ndarray, t_event: np.ndarray,
+                           stats: np.ndarray) -> None:
+    """
+    Advance with piece-piece contact: pieces alone as always, contact islands as one system.
+
+    The pairs are those within reach at the start of the interval, the reach widened by how
+    far the pieces can move in it (their speed relative to the cone, and a fall from rest).
+    A piece that leaves an island at the rim is taken out, and the rest of the island goes
+    on from the exit time. Arguments as in :func:`advance`'s arrays, updated in place.
+    """
+    solver = params.solver
+    machine = params.global_row
+    dt = t1 - state.t
+    speed = np.linalg.norm(y[:, 3:6], axis=1)
+    reach = (contact_reach(state.products) + speed * dt
+             + 0.5 * params.model.g * dt * dt)
+    pairs = contact_pairs(y[:, 0:3], reach)
+    islands = islands_of(state.count, pairs)
+    alone = np.ones(state.count, dtype=bool)
+    for island in islands:
+        alone[island] = False
+    single = np.flatnonzero(alone)
+    seg_t, seg_omega, seg_domega = profile.segments(state.t, t1)
+    if single.size:
+        ys, hs, st, te = (y[single], step_size[single], status[single], t_event[single])
+        ss = stats[single]
+        advance_batch(ys, state.products[single], machine, seg_t, seg_omega, seg_domega,
+                      params.model.r, hs, st, te, solver.rtol, params.atol, solver.h_min,
+                      solver.h_max, solver.h_init, solver.max_steps, ss)
+        y[single], step_size[single], status[single], t_event[single] = ys, hs, st, te
+        stats[single] = ss
+    pull_off = params.model.interactions.pull_off
+    for island in islands:
+        members = [int(i) for i in island]
+        t_start = state.t
+        h = float(step_size[members].min())
+        while members:
+            index = {g: k for k, g in enumerate(members)}
+            local = np.array([(index[int(i)], index[int(j)]) for i, j in pairs
+                              if int(i) in index and int(j) in index],
+                             dtype=np.int64).reshape(-1, 2)
+            seg = profile.segments(t_start, t1)
+            ys = np.ascontiguousarray(y[members])
+            counters = np.zeros(stats.shape[1], dtype=np.int64)
+            code, t_reached, h, first = advance_island(
+                ys, np.ascontiguousarray(state.products[members]), local, machine, seg[0],
+                seg[1], seg[2], params.model.r, h, solver.rtol, params.atol, solver.h_min,
+                solver.h_max, solver.h_init, solver.max_steps, pull_off, counters)
+            y[members] = ys
+            # every member took the island's steps (its cost is per piece as well)
+            stats[members, STAT_ACCEPTED] += counters[STAT_ACCEPTED]
+            stats[members, STAT_REJECTED] += counters[STAT_REJECTED]
+            if code == ACTIVE:
+                step_size[members] = h
+                break
+            if code == EXITED:
+                gone = members.pop(int(first))
+                status[gone] = EXITED
+                t_event[gone] = t_reached
+                t_start = t_reached
+                continue
+            status[members] = FAILED
+            t_event[members] = t_reached
+            stats[members, STAT_REASON] = counters[STAT_REASON]
+            break
 
 
 def _failure(state: SimState, profile: RotationProfile, y: np.ndarray, i: int, t: float,

@@ -1,0 +1,338 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Contact islands: pieces that touch, integrated as one stiff system (compiled).
+
+An island is a set of pieces connected through pairs within reach (see
+:func:`islands_of`). Its state is the pieces' states one after the other, shape (n, 9)
+in cone axes; its vector field is every piece's own field (:func:`model.rhs`) plus the
+pair forces of :func:`contact.pair_force`, equal and opposite. The island is advanced with
+the same RODAS4 method, step control, kink handling and exit location as a single piece
+(:mod:`integrator`), with a dense Jacobian: the pieces' exact blocks plus the pair blocks
+by central differences, built equal and opposite so that a step keeps the pair forces'
+momentum balance to round-off. The pair forces are therefore integrated implicitly, with
+the error the step control measures; there is no splitting error.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from .contact import pair_force
+from .integrator import (
+    ACTIVE, error_norm, EXITED, FAC_MAX, FAC_MIN, FAILED, locate_exit, REASON_NOT_FINITE,
+    REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS, SAFETY, STAT_ACCEPTED, STAT_REASON,
+    STAT_REJECTED, step_factor)
+from .model import jacobian, rhs, rhs_omega_derivative, STATE_SIZE
+from .params import G_EPS, P_M
+from .rosenbrock import (
+    A21, A31, A32, A41, A42, A43, A51, A52, A53, A54, C2, C21, C3, C31, C32, C4, C41, C42,
+    C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, ERROR_ORDER, GAMMA,
+    lu_factor, lu_solve)
+
+__all__ = ['advance_island', 'islands_of']
+
+jit = numba.njit(cache=True, error_model='numpy')
+
+#: Relative step of the central differences of the pair forces' Jacobian.
+FD_STEP = 1.0e-7
+
+
+@jit
+def island_rhs(y, products, pairs, machine, omega, domega, pull_off, out):
+    """Write the island's field into out, both (n, 9): own fields plus pair forces."""
+    n = y.shape[0]
+    for p in range(n):
+        rhs(y[p], products[p], machine, omega, domega, out[p])
+    eps = machine[G_EPS]
+    for q in range(pairs.shape[0]):
+        i = pairs[q, 0]
+        j = pairs[q, 1]
+        f0, f1, f2 = pair_force(y[i, 0:3], y[i, 3:6], products[i], y[j, 0:3], y[j, 3:6],
+                                products[j], pull_off, eps)
+        mi = products[i, P_M]
+        mj = products[j, P_M]
+        out[i, 3] += f0 / mi
+        out[i, 4] += f1 / mi
+        out[i, 5] += f2 / mi
+        out[j, 3] -= f0 / mj
+        out[j, 4] -= f1 / mj
+        out[j, 5] -= f2 / mj
+
+
+@jit
+def island_jacobian(y, products, pairs, machine, omega, domega, pull_off, jac, block, pert):
+    """
+    Write the island's Jacobian, shape (9 n, 9 n), into jac.
+
+    block (9, 9) and pert (2, 6) are scratch. The pair force depends on the differences of
+    the two pieces' positions and velocities only, so one 3x6 block of central differences
+    serves all four places, with the signs and masses of the force balance.
+    """
+    n = y.shape[0]
+    size = STATE_SIZE * n
+    for a in range(size):
+        for b in range(size):
+            jac[a, b] = 0.0
+    for p in range(n):
+        jacobian(y[p], products[p], machine, omega, domega, block)
+        o = STATE_SIZE * p
+        for a in range(STATE_SIZE):
+            for b in range(STATE_SIZE):
+                jac[o + a, o + b] = block[a, b]
+    eps = machine[G_EPS]
+    xi = np.empty(3)
+    wi = np.empty(3)
+    for q in range(pairs.shape[0]):
+        i = pairs[q, 0]
+        j = pairs[q, 1]
+        mi = products[i, P_M]
+        mj = products[j, P_M]
+        for c in range(6):  # derivative with respect to component c of (x_i, w_i)
+            for s in range(2):
+                for m in range(3):
+                    xi[m] = y[i, m]
+                    wi[m] = y[i, 3 + m]
+                delta = FD_STEP * max(abs(y[i, c]), 1e-3 if c < 3 else 1e-2)
+                sign = 1.0 if s == 0 else -1.0
+                if c < 3:
+                    xi[c] += sign * delta
+                else:
+                    wi[c - 3] += sign * delta
+                f0, f1, f2 = pair_force(xi, wi, products[i], y[j, 0:3], y[j, 3:6],
+                                        products[j], pull_off, eps)
+                if s == 0:
+                    pert[0, 0] = f0
+                    pert[0, 1] = f1
+                    pert[0, 2] = f2
+                else:
+                    for m in range(3):
+                        g = ((pert[0, m] - (f0 if m == 0 else (f1 if m == 1 else f2)))
+                             / (2.0 * delta))
+                        jac[STATE_SIZE * i + 3 + m, STATE_SIZE * i + c] += g / mi
+                        jac[STATE_SIZE * i + 3 + m, STATE_SIZE * j + c] -= g / mi
+                        jac[STATE_SIZE * j + 3 + m, STATE_SIZE * i + c] -= g / mj
+                        jac[STATE_SIZE * j + 3 + m, STATE_SIZE * j + c] += g / mj
+
+
+@jit
+def island_step(y0, f0, ft, h, omega0, domega, products, pairs, machine, pull_off, jac, lu,
+                piv, k, ys, f, y1):
+    """
+    Take one RODAS4 step of size h for the island; return False if W cannot be factored.
+
+    Flat arrays: y0, f0, ft (time derivative of the field), ys, f, y1 (9 n,); k (6, 9 n)
+    the stages (row 5 the error estimate); jac (9 n, 9 n) the Jacobian at y0; lu a matrix
+    of the same shape receiving W = I/(gamma h) - J factored.
+    """
+    size = y0.shape[0]
+    n = size // STATE_SIZE
+    alpha = 1.0 / (GAMMA * h)
+    for a in range(size):
+        for b in range(size):
+            lu[a, b] = -jac[a, b]
+        lu[a, a] += alpha
+    if not lu_factor(lu, piv):
+        return False
+    ys2 = ys.reshape(n, STATE_SIZE)
+    f2 = f.reshape(n, STATE_SIZE)
+    for i in range(size):
+        k[0, i] = f0[i] + h * D1 * ft[i]
+    lu_solve(lu, piv, k[0])
+    for i in range(size):
+        ys[i] = y0[i] + A21 * k[0, i]
+    island_rhs(ys2, products, pairs, machine, omega0 + domega * C2 * h, domega, pull_off, f2)
+    for i in range(size):
+        k[1, i] = f[i] + h * D2 * ft[i] + C21 * k[0, i] / h
+    lu_solve(lu, piv, k[1])
+    for i in range(size):
+        ys[i] = y0[i] + A31 * k[0, i] + A32 * k[1, i]
+    island_rhs(ys2, products, pairs, machine, omega0 + domega * C3 * h, domega, pull_off, f2)
+    for i in range(size):
+        k[2, i] = f[i] + h * D3 * ft[i] + (C31 * k[0, i] + C32 * k[1, i]) / h
+    lu_solve(lu, piv, k[2])
+    for i in range(size):
+        ys[i] = y0[i] + A41 * k[0, i] + A42 * k[1, i] + A43 * k[2, i]
+    island_rhs(ys2, products, pairs, machine, omega0 + domega * C4 * h, domega, pull_off, f2)
+    for i in range(size):
+        k[3, i] = f[i] + h * D4 * ft[i] + (C41 * k[0, i] + C42 * k[1, i] + C43 * k[2, i]) / h
+    lu_solve(lu, piv, k[3])
+    for i in range(size):
+        ys[i] = y0[i] + A51 * k[0, i] + A52 * k[1, i] + A53 * k[2, i] + A54 * k[3, i]
+    omega1 = omega0 + domega * h
+    island_rhs(ys2, products, pairs, machine, omega1, domega, pull_off, f2)
+    for i in range(size):
+        k[4, i] = f[i] + (C51 * k[0, i] + C52 * k[1, i] + C53 * k[2, i] + C54 * k[3, i]) / h
+    lu_solve(lu, piv, k[4])
+    for i in range(size):
+        ys[i] += k[4, i]
+    island_rhs(ys2, products, pairs, machine, omega1, domega, pull_off, f2)
+    for i in range(size):
+        k[5, i] = f[i] + (C61 * k[0, i] + C62 * k[1, i] + C63 * k[2, i] + C64 * k[3, i]
+                          + C65 * k[4, i]) / h
+    lu_solve(lu, piv, k[5])
+    for i in range(size):
+        y1[i] = ys[i] + k[5, i]
+    return True
+
+
+@jit
+def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_exit, h_prop,
+                   rtol, atol, h_min, h_max, h_kink, max_steps, pull_off, stats):
+    """
+    Advance an island through the segments, or until one of its pieces exits, or it fails.
+
+    y (n, 9) cone-axes states, updated in place; products (n, PRODUCT_WIDTH); pairs (m, 2)
+    int64 local indices; atol (9,); stats (STAT_WIDTH,) int64 counters of the island. The
+    step control is that of :func:`integrator.advance_particle`. Returns (status, t,
+    h_prop, piece): ACTIVE with the end time; EXITED with the exit time of ``piece`` (y then
+    holds every piece's state at that time); FAILED with the time reached.
+    """
+    n = y.shape[0]
+    size = STATE_SIZE * n
+    flat = y.reshape(size)
+    jac = np.empty((size, size))
+    lu = np.empty((size, size))
+    piv = np.empty(size, dtype=np.int64)
+    k = np.empty((6, size))
+    ys = np.empty(size)
+    f = np.empty(size)
+    f0 = np.empty(size)
+    ft = np.empty(size)
+    y1 = np.empty(size)
+    block = np.empty((STATE_SIZE, STATE_SIZE))
+    pert = np.empty((2, 6))
+    atol_flat = np.empty(size)
+    for i in range(size):
+        atol_flat[i] = atol[i % STATE_SIZE]
+    f0_2 = f0.reshape(n, STATE_SIZE)
+    ft_2 = ft.reshape(n, STATE_SIZE)
+    n_seg = seg_omega.shape[0]
+    steps = 0
+    t = seg_t[0]
+    h_acc = 0.0
+    err_acc = 1.0
+    r2 = r_exit * r_exit
+    for s in range(n_seg):
+        t_seg = seg_t[s]
+        t_end = seg_t[s + 1]
+        omega_s = seg_omega[s]
+        domega = seg_domega[s]
+        if s > 0 and domega != seg_domega[s - 1]:
+            h_prop = min(h_prop, h_kink)
+        fresh = True
+        rejected = False
+        while t < t_end:
+            remaining = t_end - t
+            truncated = h_prop >= remaining
+            h = remaining if truncated else h_prop
+            omega0 = omega_s + domega * (t - t_seg)
+            if fresh:
+                island_rhs(y, products, pairs, machine, omega0, domega, pull_off, f0_2)
+                island_jacobian(y, products, pairs, machine, omega0, domega, pull_off, jac,
+                                block, pert)
+                for p in range(n):
+                    rhs_omega_derivative(y[p], omega0, ft_2[p])
+                for i in range(size):
+                    ft[i] *= domega
+                fresh = False
+            ok = island_step(flat, f0, ft, h, omega0, domega, products, pairs, machine,
+                             pull_off, jac, lu, piv, k, ys, f, y1)
+            err = error_norm(k[5], flat, y1, rtol, atol_flat) if ok else np.inf
+            steps += 1
+            if steps > max_steps:
+                stats[STAT_REASON] = REASON_TOO_MANY_STEPS
+                return FAILED, t, h_prop, -1
+            if not (err <= 1.0):
+                stats[STAT_REJECTED] += 1
+                if math.isfinite(err):
+                    h_prop = h * max(FAC_MIN, SAFETY * err ** (-1.0 / (ERROR_ORDER + 1)))
+                else:
+                    h_prop = h * FAC_MIN
+                if rejected:
+                    h_prop = min(h_prop, h * FAC_MIN)
+                rejected = True
+                if h_prop < h_min:
+                    stats[STAT_REASON] = (REASON_NOT_FINITE if not math.isfinite(err)
+                                          else REASON_STEP_UNDERFLOW)
+                    return FAILED, t, h_prop, -1
+                continue
+            stats[STAT_ACCEPTED] += 1
+            first = -1
+            theta = 2.0
+            for p in range(n):
+                o = STATE_SIZE * p
+                if y1[o] * y1[o] + y1[o + 1] * y1[o + 1] >= r2:
+                    th = locate_exit(h, flat[o:o + STATE_SIZE], y1[o:o + STATE_SIZE], r_exit)
+                    if th < theta:
+                        theta = th
+                        first = p
+            if first >= 0:
+                h_exit = theta * h
+                ok = island_step(flat, f0, ft, h_exit, omega0, domega, products, pairs,
+                                 machine, pull_off, jac, lu, piv, k, ys, f, y1)
+                if not ok:
+                    stats[STAT_REASON] = REASON_NOT_FINITE
+                    return FAILED, t, h_prop, -1
+                for i in range(size):
+                    flat[i] = y1[i]
+                return EXITED, t + h_exit, h_prop, first
+            for i in range(size):
+                flat[i] = y1[i]
+            fresh = True
+            grow = step_factor(err)
+            if h_acc > 0.0 and err > 0.0:
+                pred = SAFETY * (h / h_acc) * (err_acc / (err * err)) ** (
+                    1.0 / (ERROR_ORDER + 1))
+                grow = min(grow, max(FAC_MIN, min(FAC_MAX, pred)))
+            if rejected:
+                grow = min(grow, 1.0)
+            rejected = False
+            h_acc = h
+            err_acc = max(err, 1e-4)
+            if truncated:
+                t = t_end
+                h_prop = min(h_max, max(h_prop, h * grow))
+            else:
+                t += h
+                h_prop = min(h_max, h * grow)
+    return ACTIVE, t, h_prop, -1
+
+
+def islands_of(count: int, pairs: np.ndarray) -> list[np.ndarray]:
+    """
+    Return the islands of ``count`` pieces linked by ``pairs`` (M, 2): sorted index arrays.
+
+    Only islands of two or more pieces are returned, ordered by their smallest index.
+    """
+    parent = np.arange(count)
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return int(i)
+
+    for i, j in pairs:
+        a, b = root(int(i)), root(int(j))
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+    roots = np.array([root(i) for i in range(count)], dtype=np.int64)
+    linked = np.unique(pairs) if len(pairs) else np.empty(0, dtype=np.int64)
+    groups: dict[int, list[int]] = {}
+    for i in linked:
+        groups.setdefault(int(roots[i]), []).append(int(i))
+    return [np.array(sorted(g), dtype=np.int64) for _, g in sorted(groups.items())]

@@ -1,0 +1,183 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""Pieces that touch: the coupled integration against the reference the tests build."""
+
+from cone_feeder_sim.physics.islands import islands_of
+from cone_feeder_sim.physics.params import (
+    InteractionParams, ModelParams, product_row, ProductParams, SolverParams)
+from cone_feeder_sim.physics.rotation import RotationProfile
+from cone_feeder_sim.physics.simulation import (
+    contact_reach, resting_height, SimParams, Simulator)
+import numpy as np
+import pytest
+from reference_contacts import crowd_exits, crowd_trajectory
+from reference_model import initial_state_on_feeder, table2_params
+
+STILL = [[0.0, 0.0], [100.0, 0.0]]
+TURNING = [[0.0, 0.0], [0.4, -8.0], [5.0, -8.0]]
+HEAVY = ProductParams(m=0.2, s0=0.03)  # another product: heavier and larger
+
+
+def model(pull_off: float = 0.05, enabled: bool = True) -> ModelParams:
+    return ModelParams(interactions=InteractionParams(enabled=enabled, pull_off=pull_off))
+
+
+def simulate(m: ModelParams, table: list, positions: np.ndarray, velocities=None,
+             products=None, t_end: float = 0.3, dt: float = 0.02,
+             rtol: float | None = None) -> tuple[Simulator, dict[int, tuple[float, float]]]:
+    solver = SolverParams() if rtol is None else SolverParams(
+        rtol=rtol, atol_position=0.1 * rtol, atol_velocity=rtol, atol_force=10.0 * rtol)
+    sim = Simulator(SimParams(model=m, solver=solver), RotationProfile.from_table(table))
+    sim.add(positions, velocities, products)
+    exits = {}
+    for k in range(1, int(round(t_end / dt)) + 1):
+        result = sim.advance_to(dt * k)
+        assert not result.failures
+        exits.update({int(i): (float(t), float(a)) for i, t, a in
+                      zip(result.exits.ids, result.exits.t, result.exits.angle_deg)})
+    return sim, exits
+
+
+def resting(m: ModelParams, xy: list) -> np.ndarray:
+    xy = np.asarray(xy, dtype=float)
+    z = [resting_height(m, m.product, a, b) for a, b in xy]
+    return np.column_stack([xy, z])
+
+
+def test_islands_are_the_connected_pieces() -> None:
+    pairs = np.array([[0, 3], [3, 5], [1, 2], [6, 7]])
+    got = islands_of(9, pairs)
+    assert [list(g) for g in got] == [[0, 3, 5], [1, 2], [6, 7]]
+    assert islands_of(4, np.empty((0, 2), dtype=np.int64)) == []
+
+
+def test_contact_reach_covers_the_force() -> None:
+    reach = contact_reach(np.array([product_row(ProductParams())]))[0]
+    assert reach == pytest.approx(0.0375 / 2 + np.arctanh(1 - 2e-6) / (2 * np.arctanh(0.99))
+                                  * 0.0125, rel=1e-12)
+
+
+@pytest.mark.parametrize('v', [0.2, 1.0])
+def test_a_collision_in_free_flight_keeps_momentum_and_follows_the_reference(v: float) -> None:
+    # well above the cone, at rest: a default piece hits a heavier, larger one
+    positions = np.array([[-0.065, 0.0, 20.0], [0.0, 0.0, 20.0]])
+    velocities = np.array([[v, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    sim = Simulator(SimParams(model=model(0.0)), RotationProfile.from_table(STILL))
+    sim.add(positions, velocities, [ProductParams(), HEAVY])
+    t_out = np.linspace(0.01, 0.3, 30)
+    ref = crowd_trajectory([table2_params(1), table2_params(1, m=0.2, s0=0.03)],
+                           np.hstack([positions, velocities, np.zeros((2, 3))]), STILL, 0.3,
+                           t_eval=t_out)
+    ref_y = ref.y.reshape(2, 9, -1)
+    for k, t in enumerate(t_out):
+        sim.advance_to(float(t))
+        q, qdot, _ = sim.world()
+        momentum = 0.125 * qdot[0, :2] + 0.2 * qdot[1, :2]
+        assert np.abs(momentum - [0.125 * v, 0.0]).max() < 1e-15  # to round-off
+        np.testing.assert_allclose(q, ref_y[:, 0:3, k], atol=2e-7)
+        np.testing.assert_allclose(qdot, ref_y[:, 3:6, k], atol=2e-5)
+    # the pieces touched and parted slower than they met (inelastic)
+    assert 0.0 < (qdot[1, 0] - qdot[0, 0]) / v < 0.3
+
+
+@pytest.fixture(scope='module')
+def crowd_at_the_rim() -> tuple[np.ndarray, dict, dict]:
+    """Six touching pieces near the rim, the cone spun up to -8 rad/s; both solutions."""
+    m = model()
+    positions = resting(m, [[0.15, 0.0], [0.19, 0.02], [0.16, 0.045], [0.12, 0.02],
+                            [0.20, -0.025], [0.14, -0.04]])
+    _, exits = simulate(m, TURNING, positions, t_end=1.1)
+    y0 = np.array([initial_state_on_feeder(x, 0.0) for x in positions])
+    reference = crowd_exits([table2_params(1)] * 6, y0, TURNING, 1.1, pull_off=0.05)
+    return positions, exits, reference
+
+
+def test_touching_pieces_exit_where_the_coupled_reference_says(crowd_at_the_rim) -> None:
+    positions, exits, reference = crowd_at_the_rim
+    # ids are given in order from 0; every piece leaves, as in the reference
+    assert sorted(exits) == sorted(reference) == list(range(6))
+    for i in range(6):
+        assert abs(exits[i][0] - reference[i][0]) < 2e-3  # s
+        assert abs((exits[i][1] - reference[i][1] + 180.0) % 360.0 - 180.0) < 0.1  # deg
+    # the pieces do push each other: without interactions they leave elsewhere
+    _, alone = simulate(model(enabled=False), TURNING, positions, t_end=1.1)
+    assert max(abs(alone[i][1] - exits[i][1]) for i in range(6)) > 1.0
+
+
+def test_the_case_is_robust(crowd_at_the_rim) -> None:
+    positions, exits, _ = crowd_at_the_rim
+    moved = positions.copy()
+    moved[2, 0] += 1e-6
+    _, again = simulate(model(), TURNING, moved, t_end=1.1)
+    assert max(abs(again[i][1] - exits[i][1]) for i in range(6)) < 0.2
+
+
+def test_pieces_out_of_reach_move_exactly_as_without_interactions() -> None:
+    positions = resting(model(), [[0.05, 0.0], [-0.1, 0.05], [0.0, -0.15]])
+    a, _ = simulate(model(), TURNING, positions, t_end=0.6)
+    b, _ = simulate(model(enabled=False), TURNING, positions, t_end=0.6)
+    np.testing.assert_array_equal(a.state.y, b.state.y)
+
+
+def test_a_mirrored_crowd_under_mirrored_rotation_mirrors() -> None:
+    m = model()
+    positions = resting(m, [[0.06, 0.01], [0.105, 0.015], [0.08, 0.05], [0.12, -0.02]])
+    mirrored = positions * [1.0, -1.0, 1.0]
+    a, ea = simulate(m, TURNING, positions, t_end=0.8)
+    b, eb = simulate(m, [[t, -w] for t, w in TURNING], mirrored, t_end=0.8)
+    qa, _, _ = a.world()
+    qb, _, _ = b.world()
+    np.testing.assert_allclose(qb, qa * [1.0, -1.0, 1.0], atol=1e-9)
+    assert ea.keys() == eb.keys()
+
+
+def test_the_error_shrinks_with_the_tolerance() -> None:
+    m = model()
+    positions = resting(m, [[0.06, 0.0], [0.105, 0.005], [0.15, 0.0], [0.08, 0.04]])
+    y0 = np.array([initial_state_on_feeder(x, 0.0) for x in positions])
+    table = [[0.0, 0.0], [0.3, -6.0], [5.0, -6.0]]
+    ref = crowd_trajectory([table2_params(1)] * 4, y0, table, 0.4, pull_off=0.05,
+                           t_eval=[0.4]).y[:, -1].reshape(4, 9)[:, :3]
+    errors = []
+    for rtol in (1e-3, 1e-5, 1e-7):
+        sim, _ = simulate(m, table, positions, t_end=0.4, rtol=rtol)
+        errors.append(np.abs(sim.world()[0] - ref).max())
+    # measured: 9.1e-7, 3.6e-8 and 5.0e-10 m
+    assert errors[0] > 5.0 * errors[1] > 25.0 * errors[2]
+    assert errors[2] < 1e-8  # m
+
+
+def test_a_pile_settles() -> None:
+    # 40 pieces in two layers 5.2 cm apart, dropped 1 cm onto a stationary cone
+    m = model()
+    rng = np.random.default_rng(1)
+    xy = [(-0.03 + 0.052 * i, -0.08 + 0.052 * j) for i in range(5) for j in range(4)]
+    ground = resting(m, xy)
+    positions = np.vstack([ground + [0.0, 0.0, 0.01], ground + [0.0, 0.0, 0.062]])
+    positions += rng.normal(0.0, 0.002, positions.shape)
+    sim = Simulator(SimParams(model=m), RotationProfile.from_table(STILL))
+    sim.add(positions, np.zeros_like(positions))
+    energy = []
+    for k in range(1, 61):
+        result = sim.advance_to(0.02 * k)
+        assert not result.failures and not len(result.exits)
+        _, qdot, _ = sim.world()
+        energy.append(0.5 * 0.125 * float((qdot ** 2).sum()))
+    q, _, _ = sim.world()
+    dist = np.linalg.norm(q[:, None] - q[None], axis=2) + np.eye(40)
+    assert dist.min() > 2.0 * m.product.s_c  # never closer than the compression radii
+    assert q[:, 2].max() < positions[:, 2].max()  # nothing thrown up
+    assert energy[-1] < 1e-3 * max(energy) and energy[-1] < energy[-10] < energy[-20]
