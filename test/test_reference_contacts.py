@@ -39,7 +39,7 @@ def head_on(v: float, t_end: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
 
 
 def reduced(v: float, t_end: float = 0.3) -> np.ndarray:
-    """The same collision as one degree of freedom: m/2 s'' = R_a(s) F_c(s'), s = distance."""
+    """Solve the collision as one degree of freedom: m/2 s'' = R_a(s) F_c(s'), s = distance."""
     p = table2_params(1)
     s0, s_c = 2.0 * p['s0'], 2.0 * p['s_c_ratio'] * p['s0']
     r_t = 2.0 * math.atanh(p['r_a']) / (s0 - s_c)
