@@ -21,6 +21,8 @@ A scenario is a YAML mapping::
     parameters: table2.yaml       # optional parameter file (relative to the scenario)
     model: {d: 225.0}             # optional overrides of the parameter file, same keys
     solver: {rtol: 1.0e-5}        # optional integrator settings
+    interactions: {enabled: true} # optional contact between pieces (default: the
+                                  # parameter file's, off in table2.yaml: the paper's model)
     output_interval: 0.01         # s, optional: interval of progress and trajectory output
     rotation: [[0.0, 0.0], [0.4, -10.47]]   # [t s, omega rad/s]; linear between, held after
     particles:
@@ -33,6 +35,7 @@ Every problem is reported with its location (e.g. `particles[2].position`).
 """
 
 from collections.abc import Mapping
+from dataclasses import replace
 import math
 from pathlib import Path
 from typing import Any
@@ -42,12 +45,13 @@ import numpy as np
 from .parameter_file import load_model_params, read_yaml
 from ..errors import ConeFeederError, ScenarioError
 from ..feeder.scenario import ParticleSpec, Scenario
-from ..physics.params import PRODUCT_LIMITS, solver_params_from_mapping
+from ..physics.params import (
+    interaction_params_from_mapping, PRODUCT_LIMITS, solver_params_from_mapping)
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import check_positions, resting_height
 
-SCENARIO_KEYS = ('duration', 'parameters', 'model', 'solver', 'output_interval', 'rotation',
-                 'particles')
+SCENARIO_KEYS = ('duration', 'parameters', 'model', 'solver', 'interactions',
+                 'output_interval', 'rotation', 'particles')
 PARTICLE_KEYS = ('position', 'velocity', 'on_surface')
 
 
@@ -92,6 +96,9 @@ def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenari
             param_file = base_dir / param_file
     try:
         model = load_model_params(param_file, overrides)
+        if content.get('interactions') is not None:
+            model = replace(model, interactions=interaction_params_from_mapping(
+                content['interactions'], model.interactions))
         solver = solver_params_from_mapping(content.get('solver'))
         rotation = RotationProfile.from_table(content['rotation'])
     except ConeFeederError as exc:

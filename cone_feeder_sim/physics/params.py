@@ -372,6 +372,24 @@ class ModelParams:
         return row
 
 
+#: Keys of the ``interactions`` mapping of parameter files and scenarios.
+INTERACTION_KEYS = ('enabled', 'pull_off')
+
+
+def interaction_params_from_mapping(mapping: Any,
+                                    base: InteractionParams | None = None) -> InteractionParams:
+    """Build validated contact settings from an ``interactions`` mapping over ``base``."""
+    base = base if base is not None else InteractionParams()
+    if not isinstance(mapping, Mapping):
+        raise ParameterError(f'interactions must be a mapping with keys '
+                             f'{", ".join(INTERACTION_KEYS)}, got {mapping!r}')
+    unknown = sorted(str(k) for k in set(mapping) - set(INTERACTION_KEYS))
+    if unknown:
+        raise ParameterError(f'unknown interactions key(s) {", ".join(map(repr, unknown))}; '
+                             f'known: {", ".join(INTERACTION_KEYS)}')
+    return replace(base, **dict(mapping))
+
+
 MODEL_KEYS = ('g', 'cone_diameter', 'cone_tilt', 'epsilon', 'tip_epsilon', 'normal_force',
               'friction_direction')
 CHANNEL_KEYS = {'channel_count': 'count', 'channel_boundary': 'boundary',
@@ -383,14 +401,15 @@ def model_params_from_mapping(mapping: Mapping[str, Any],
     """
     Build validated :class:`ModelParams` from a flat mapping of parameter-file keys.
 
-    Keys are those of the parameter file (product keys, model keys and channel keys); keys
+    Keys are those of the parameter file (product keys, model keys, channel keys and the
+    ``interactions`` mapping); keys
     missing from the mapping keep their value in `base` (Table II by default). Unknown keys
     and invalid values raise :class:`ParameterError` naming the key.
     """
     base = base if base is not None else ModelParams()
     if not isinstance(mapping, Mapping):
         raise ParameterError(f'parameters must be a mapping of key: value, got {mapping!r}')
-    known = set(PRODUCT_LIMITS) | set(MODEL_KEYS) | set(CHANNEL_KEYS)
+    known = set(PRODUCT_LIMITS) | set(MODEL_KEYS) | set(CHANNEL_KEYS) | {'interactions'}
     unknown = sorted(str(k) for k in set(mapping) - known)
     if unknown:
         raise ParameterError(
@@ -401,7 +420,10 @@ def model_params_from_mapping(mapping: Mapping[str, Any],
     channels = replace(base.channels, **{CHANNEL_KEYS[k]: v for k, v in mapping.items()
                                          if k in CHANNEL_KEYS})
     model = {k: v for k, v in mapping.items() if k in MODEL_KEYS}
-    return replace(base, product=product, channels=channels, **model)
+    interactions = (interaction_params_from_mapping(mapping['interactions'], base.interactions)
+                    if 'interactions' in mapping else base.interactions)
+    return replace(base, product=product, channels=channels, interactions=interactions,
+                   **model)
 
 
 @dataclass(frozen=True)

@@ -135,11 +135,17 @@ class Failure:
 
 @dataclass(frozen=True)
 class StepStats:
-    """Solver statistics of one interval: accepted and rejected steps over all particles."""
+    """
+    Solver statistics of one interval: accepted and rejected steps over all particles.
+
+    uncoupled: pieces of contact islands larger than MAX_ISLAND_PIECES, which were advanced
+    without their contacts in this interval (they may pass through each other).
+    """
 
     accepted: int
     rejected: int
     particles: int
+    uncoupled: int = 0
 
 
 @dataclass(frozen=True)
@@ -303,9 +309,10 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     stats = np.zeros((n, STAT_WIDTH), dtype=np.int64)
     solver = params.solver
     interactions = params.model.interactions
+    uncoupled = 0
     if interactions.enabled and n > 1:
-        _advance_with_contacts(state, params, profile, t1, y, step_size, status, t_event,
-                               stats)
+        uncoupled = _advance_with_contacts(state, params, profile, t1, y, step_size, status,
+                                           t_event, stats)
     elif n:
         advance_batch(y, state.products, params.global_row, seg_t, seg_omega, seg_domega,
                       params.model.r, step_size, status, t_event, solver.rtol, params.atol,
@@ -320,9 +327,15 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
                         y=y[keep], products=state.products[keep], ids=state.ids[keep],
                         step_size=step_size[keep])
     step_stats = StepStats(accepted=int(stats[:, STAT_ACCEPTED].sum()),
-                           rejected=int(stats[:, STAT_REJECTED].sum()), particles=n)
+                           rejected=int(stats[:, STAT_REJECTED].sum()), particles=n,
+                           uncoupled=uncoupled)
     return StepResult(state=new_state, exits=exits, failures=failures, stats=step_stats)
 
+
+#: Largest contact island integrated as one system. An island is integrated with a dense
+#: Jacobian (9 n unknowns, O(n^3) per step); larger islands are advanced without their
+#: contacts for the interval, and counted in :attr:`StepStats.uncoupled`.
+MAX_ISLAND_PIECES = 48
 
 #: The pair force is below this fraction of r_f beyond the contact reach (activation 1e-6).
 CONTACT_CUTOFF_ACTIVATION = 1.0e-6
@@ -346,9 +359,11 @@ def contact_reach(products: np.ndarray) -> np.ndarray:
 def _advance_with_contacts(state: SimState, params: SimParams, profile: RotationProfile,
                            t1: float, y: np.ndarray, step_size: np.ndarray,
                            status: np.ndarray, t_event: np.ndarray,
-                           stats: np.ndarray) -> None:
+                           stats: np.ndarray) -> int:
     """
     Advance with piece-piece contact: pieces alone as always, contact islands as one system.
+
+    Returns how many pieces were in islands too large to couple (see MAX_ISLAND_PIECES).
 
     The pairs are those within reach at the start of the interval, the reach widened by how
     far the pieces can move in it (their speed relative to the cone, and a fall from rest).
@@ -363,6 +378,8 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
              + 0.5 * params.model.g * dt * dt)
     pairs = contact_pairs(y[:, 0:3], reach)
     islands = islands_of(state.count, pairs)
+    uncoupled = sum(len(island) for island in islands if len(island) > MAX_ISLAND_PIECES)
+    islands = [island for island in islands if len(island) <= MAX_ISLAND_PIECES]
     alone = np.ones(state.count, dtype=bool)
     for island in islands:
         alone[island] = False
@@ -410,6 +427,7 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
             t_event[members] = t_reached
             stats[members, STAT_REASON] = counters[STAT_REASON]
             break
+    return uncoupled
 
 
 def _failure(state: SimState, profile: RotationProfile, y: np.ndarray, i: int, t: float,

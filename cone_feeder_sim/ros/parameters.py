@@ -23,7 +23,7 @@ ROS parameter accept the same values. The builders turn parameter values into th
 configuration; they need no ROS.
 """
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 import difflib
 from functools import cache
 import sys
@@ -42,8 +42,8 @@ from ..formats.parameter_file import config_dir
 from ..formats.runlog import DEFAULT_RECORD_PATH, model_parameter_values
 from ..formats.scenario_file import load_scenario
 from ..physics.params import (
-    CHANNEL_KEYS, Limit, MODEL_KEYS, MODEL_LIMITS, model_params_from_mapping, ModelParams,
-    PRODUCT_LIMITS, SOLVER_LIMITS, SolverParams)
+    CHANNEL_KEYS, INTERACTION_LIMITS, InteractionParams, Limit, MODEL_KEYS, MODEL_LIMITS,
+    model_params_from_mapping, ModelParams, PRODUCT_LIMITS, SOLVER_LIMITS, SolverParams)
 
 __all__ = [
     'DRIVE_PARAMETERS',
@@ -344,7 +344,16 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
     specs += [ParamSpec(f'solver.{f.name}', getattr(solver, f.name),
                         _SOLVER_DESCRIPTIONS[f.name], limit=SOLVER_LIMITS[f.name])
               for f in fields(SolverParams)]
-    specs += model_param_specs(base if base is not None else ModelParams())
+    model = base if base is not None else ModelParams()
+    specs += [
+        ParamSpec('interactions.enabled', True, 'contact between pieces: they push, rub and '
+                  "stick to each other (on in the node; off is the paper's model, where "
+                  "pieces pass through each other); overrides the parameter file's value"),
+        ParamSpec('interactions.pull_off', model.interactions.pull_off, 'adhesion between two '
+                  'just-touching pieces (N); default from the parameter file',
+                  limit=INTERACTION_LIMITS['pull_off']),
+    ]
+    specs += model_param_specs(model)
     return specs
 
 
@@ -380,7 +389,8 @@ def model_from_values(values: dict[str, Any], base: ModelParams) -> ModelParams:
 
 def engine_config_from_values(values: dict[str, Any], base: ModelParams) -> EngineConfig:
     """Build and validate the whole engine configuration from parameter values."""
-    model = model_from_values(values, base)
+    model = replace(model_from_values(values, base), interactions=InteractionParams(
+        enabled=values['interactions.enabled'], pull_off=values['interactions.pull_off']))
     solver = SolverParams(**{name[len('solver.'):]: value for name, value in values.items()
                              if name.startswith('solver.')})
     flat = _array(values['initial_pieces.positions'])

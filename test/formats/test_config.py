@@ -53,3 +53,15 @@ def test_solver_settings() -> None:
     assert solver_params_from_mapping({'rtol': 1e-6}).rtol == 1e-6
     with pytest.raises(ParameterError, match="unknown solver setting\\(s\\) 'tol'"):
         solver_params_from_mapping({'tol': 1e-6})
+
+
+def test_the_parameter_file_holds_the_contact_settings(tmp_path: Path) -> None:
+    assert load_model_params().interactions == ModelParams().interactions
+    assert not ModelParams().interactions.enabled
+    path = tmp_path / 'sticky.yaml'
+    path.write_text('interactions: {enabled: true, pull_off: 0.5}\n')
+    model = load_model_params(path)
+    assert model.interactions.enabled and model.interactions.pull_off == 0.5
+    path.write_text('interactions: {pull_of: 0.5}\n')
+    with pytest.raises(ParameterError, match="unknown interactions key.*'pull_of'"):
+        load_model_params(path)

@@ -101,3 +101,23 @@ def test_parameter_file_relative_to_the_scenario(tmp_path: Path) -> None:
     sc = load_scenario(tmp_path / 's.yaml')
     assert sc.model.product.d == 30.0 and sc.model.product.mu_C == 0.5
     assert sc.model.product.mu_S == 0.99  # the rest from Table II defaults
+
+
+def test_interactions_are_off_unless_the_scenario_turns_them_on() -> None:
+    assert scenario_from_mapping(VALID).model.interactions.enabled is False  # paper's model
+    sc = scenario_from_mapping({**VALID, 'interactions': {'enabled': True, 'pull_off': 0.2}})
+    assert sc.model.interactions.enabled is True and sc.model.interactions.pull_off == 0.2
+    sc = scenario_from_mapping({**VALID, 'interactions': {'enabled': True}})
+    assert sc.model.interactions.pull_off == 0.05  # the parameter file's
+
+
+@pytest.mark.parametrize('value, fragment', [
+    ({'enabled': 'yes'}, "'interactions.enabled' must be true or false"),
+    ({'pull_off': -1.0}, "'interactions.pull_off' = -1 is out of range"),
+    ({'stickiness': 1.0}, "unknown interactions key(s) 'stickiness'"),
+    ([True], 'interactions must be a mapping'),
+])
+def test_bad_interactions_name_the_problem(value: object, fragment: str) -> None:
+    with pytest.raises(ScenarioError) as info:
+        scenario_from_mapping({**VALID, 'interactions': value})
+    assert fragment in str(info.value)

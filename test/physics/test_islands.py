@@ -181,3 +181,19 @@ def test_a_pile_settles() -> None:
     assert dist.min() > 2.0 * m.product.s_c  # never closer than the compression radii
     assert q[:, 2].max() < positions[:, 2].max()  # nothing thrown up
     assert energy[-1] < 1e-3 * max(energy) and energy[-1] < energy[-10] < energy[-20]
+
+
+def test_an_island_too_large_is_counted_and_advanced_without_contacts() -> None:
+    from cone_feeder_sim.physics.simulation import MAX_ISLAND_PIECES
+    m = model()
+    count = MAX_ISLAND_PIECES + 2
+    rng = np.random.default_rng(4)
+    positions = resting(m, rng.uniform(-0.03, 0.03, (count, 2))) + [0.0, 0.0, 0.01]
+    sim = Simulator(SimParams(model=m), RotationProfile.from_table(STILL))
+    sim.add(positions, np.zeros_like(positions))
+    result = sim.advance_to(0.02)
+    assert result.stats.uncoupled == count
+    alone = Simulator(SimParams(model=model(enabled=False)), RotationProfile.from_table(STILL))
+    alone.add(positions, np.zeros_like(positions))
+    alone.advance_to(0.02)
+    np.testing.assert_array_equal(sim.state.y, alone.state.y)

@@ -472,3 +472,23 @@ def test_topics_are_relative_and_described_for_recording(ros: Ros) -> None:
     assert topics['/line2/markers'].qos.durability == 'transient_local'
     assert topics['/line2/particle_states'].type_name == 'sensor_msgs/msg/PointCloud2'
     assert topics['/line2/rotation_cmd'].direction == 'in'
+
+
+@pytest.mark.parametrize('enabled', [True, False])
+def test_pieces_dropped_on_each_other_touch_by_default(ros: Ros, enabled: bool) -> None:
+    # a piece released 6 cm above another on the resting cone
+    params = {'feed.rate': 0.0, 'open_loop_pattern': [], 'start_paused': True,
+              'initial_pieces.positions': [0.1, 0.0, 0.035, 0.1, 0.0, 0.095],
+              'initial_pieces.d': []}
+    if not enabled:
+        params['interactions.enabled'] = False
+    sim = ros.sim(**params)
+    assert sim.engine.model.interactions.enabled is enabled
+    for _ in range(40):
+        sim.step()
+    q = sim.last_tick.positions
+    gap = float(np.linalg.norm(q[1] - q[0]))
+    if enabled:  # it rests on the other (the restriction balances its weight near 47 mm)
+        assert 0.04 < gap < 0.05 and q[1, 2] > q[0, 2]
+    else:  # the paper's model: it falls through, to within a landing's slide (10 mm)
+        assert gap < 0.02

@@ -173,7 +173,8 @@ def test_recording_holds_every_topic_the_inputs_and_the_parameters(
         assert kind in kinds, kind
     rotation = [e for e in recorded if e['event'] == 'rotation']
     assert [e['omega'] for e in rotation] == [8.0, -9.0]
-    assert all(e['tick'] > 10 for e in rotation)
+    # sent once tick 10 was under way or done: applied by tick 10 at the earliest
+    assert all(e['tick'] >= 10 for e in rotation)
     spawn = next(e for e in recorded if e['event'] == 'spawn')
     assert spawn['positions'] == [[0.05, 0.02, 0.05], [-0.08, 0.03, 0.04]]
     for e in recorded:
