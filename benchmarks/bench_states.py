@@ -28,10 +28,13 @@ pieces) and the median and longest tick. The states:
 * ``reversing``: the default reversing pattern (+-8 rad/s, 2 s each way) with the feed
   keeping N pieces on the cone (exits replaced as they happen), one pattern period.
 
-Pieces start at seeded random places with rho in [0.03, 0.15] m. The calibration workload
-is printed first. Example::
+Pieces start at seeded random places with rho in [0.03, 0.15] m. With ``--interactions``
+every row is measured twice, side by side: pieces alone (the paper's model) and pieces that
+touch (contact islands), with the cost ratio and the pieces left uncoupled (islands too
+large). The calibration workload is printed first. Example::
 
     .venv/bin/python benchmarks/bench_states.py --pieces 20 150 2000 5000
+    .venv/bin/python benchmarks/bench_states.py --pieces 150 1000 --interactions
 """
 
 import argparse
@@ -41,7 +44,7 @@ import time
 from calibration import calibration_line
 from cone_feeder_sim.feeder.engine import (
     DriveParams, EngineConfig, FeederEngine, FeedParams)
-from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.params import InteractionParams, ModelParams
 from cone_feeder_sim.physics.simulation import resting_height
 import numba
 import numpy as np
@@ -62,14 +65,16 @@ def places(count: int, lift: float) -> np.ndarray:
     return np.column_stack([x, y, z])
 
 
-def engine_for(state: str, count: int) -> tuple[FeederEngine, int, int]:
+def engine_for(state: str, count: int, contacts: bool) -> tuple[FeederEngine, int, int]:
     """Return the engine in ``state`` with ``count`` pieces, warm-up and measured ticks."""
+    model = ModelParams(interactions=InteractionParams(enabled=contacts))
     if state == 'reversing':
         feed = FeedParams(rate=max(500.0, count), max_pieces=count)
-        engine = FeederEngine(EngineConfig(drive=DriveParams(pattern=PATTERN), feed=feed))
+        engine = FeederEngine(EngineConfig(model=model, drive=DriveParams(pattern=PATTERN),
+                                           feed=feed))
         fill = int(np.ceil(count / feed.rate / engine.dt)) + 100  # fill, then 2 s in
         return engine, fill, int(round(4.0 / engine.dt))
-    engine = FeederEngine(EngineConfig(drive=DriveParams(cmd_timeout=0.0),
+    engine = FeederEngine(EngineConfig(model=model, drive=DriveParams(cmd_timeout=0.0),
                                        feed=FeedParams(max_pieces=max(count, 1))))
     if state == 'dropped':
         engine.spawn(places(count, 0.02), velocities=np.zeros((count, 3)))
@@ -79,12 +84,12 @@ def engine_for(state: str, count: int) -> tuple[FeederEngine, int, int]:
     return engine, 50, 50  # 1 s to settle (and spin up), 1 s measured
 
 
-def measure(state: str, count: int) -> dict[str, float]:
+def measure(state: str, count: int, contacts: bool = False) -> dict[str, float]:
     """Run one state with ``count`` pieces; return the figures."""
-    engine, warm, ticks = engine_for(state, count)
+    engine, warm, ticks = engine_for(state, count, contacts)
     for _ in range(warm):
         engine.tick()
-    durations, piece_seconds, steps = [], 0.0, 0
+    durations, piece_seconds, steps, uncoupled = [], 0.0, 0, 0
     cpu0 = time.process_time()
     wall0 = time.perf_counter()
     for _ in range(ticks):
@@ -94,11 +99,13 @@ def measure(state: str, count: int) -> dict[str, float]:
         piece_seconds += engine.dt * (len(result.ids) + len(result.exits)
                                       + len(result.failures))
         steps += result.stats.accepted + result.stats.rejected
+        uncoupled = max(uncoupled, result.stats.uncoupled)
     wall = time.perf_counter() - wall0
     cpu = time.process_time() - cpu0
     return {'pieces': engine.piece_count, 'per_cpu': piece_seconds / cpu,
             'steps': steps / max(piece_seconds, 1e-12), 'capacity': ticks * engine.dt / wall,
-            'median_ms': 1e3 * statistics.median(durations), 'max_ms': 1e3 * max(durations)}
+            'median_ms': 1e3 * statistics.median(durations), 'max_ms': 1e3 * max(durations),
+            'uncoupled': uncoupled}
 
 
 def main() -> None:
@@ -106,8 +113,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--pieces', type=int, nargs='+', default=[20, 150, 2000, 5000])
     parser.add_argument('--states', nargs='+', choices=STATES, default=list(STATES))
+    parser.add_argument('--interactions', action='store_true',
+                        help='measure each row without and with contact between pieces')
     args = parser.parse_args()
     print(calibration_line())
+    if args.interactions:
+        compare(args)
+        return
     print(f'# 50 Hz ticks, {numba.get_num_threads()} threads; capacity = simulated s per '
           'wall s; pc-s/CPU-s = particle-seconds per CPU-second (all threads)')
     print(f'{"state":>10} {"N":>6} {"pc-s/CPU-s":>11} {"steps/pc-s":>11} {"capacity":>9} '
@@ -118,6 +130,23 @@ def main() -> None:
             print(f'{state:>10} {int(r["pieces"]):>6} {r["per_cpu"]:>11.0f} '
                   f'{r["steps"]:>11.0f} {r["capacity"]:>9.2f} {r["median_ms"]:>10.2f} '
                   f'{r["max_ms"]:>8.1f}', flush=True)
+
+
+
+def compare(args: argparse.Namespace) -> None:
+    """Print each state and count without and with contacts, side by side."""
+    print('# pc-s/CPU-s without and with contact between pieces; cost ratio = with / '
+          'without per particle-second; uncoupled = most pieces left out of a large island')
+    print(f'{"state":>10} {"N":>6} {"without":>9} {"with":>9} {"ratio":>6} {"capacity":>9} '
+          f'{"max ms":>8} {"uncoupled":>9}')
+    for state in args.states:
+        for count in args.pieces:
+            alone = measure(state, count, False)
+            touch = measure(state, count, True)
+            print(f'{state:>10} {int(touch["pieces"]):>6} {alone["per_cpu"]:>9.0f} '
+                  f'{touch["per_cpu"]:>9.0f} {alone["per_cpu"] / touch["per_cpu"]:>6.2f} '
+                  f'{touch["capacity"]:>9.2f} {touch["max_ms"]:>8.1f} '
+                  f'{int(touch["uncoupled"]):>9}', flush=True)
 
 
 if __name__ == '__main__':

@@ -312,27 +312,47 @@ def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_
     return ACTIVE, t, h_prop, -1
 
 
-def islands_of(count: int, pairs: np.ndarray) -> list[np.ndarray]:
-    """
-    Return the islands of ``count`` pieces linked by ``pairs`` (M, 2): sorted index arrays.
-
-    Only islands of two or more pieces are returned, ordered by their smallest index.
-    """
+@jit
+def _roots(count, pairs):
+    """Return each piece's island label (its smallest index), union-find over the pairs."""
     parent = np.arange(count)
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return int(i)
-
-    for i, j in pairs:
-        a, b = root(int(i)), root(int(j))
+    for q in range(pairs.shape[0]):
+        a = pairs[q, 0]
+        while parent[a] != a:
+            a = parent[a]
+        b = pairs[q, 1]
+        while parent[b] != b:
+            b = parent[b]
         if a != b:
             parent[max(a, b)] = min(a, b)
-    roots = np.array([root(i) for i in range(count)], dtype=np.int64)
-    linked = np.unique(pairs) if len(pairs) else np.empty(0, dtype=np.int64)
-    groups: dict[int, list[int]] = {}
-    for i in linked:
-        groups.setdefault(int(roots[i]), []).append(int(i))
-    return [np.array(sorted(g), dtype=np.int64) for _, g in sorted(groups.items())]
+    for i in range(count):  # parents have smaller indices: one pass flattens
+        parent[i] = parent[parent[i]]
+    return parent
+
+
+def islands_of(count: int, pairs: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """
+    Return the islands of ``count`` pieces linked by ``pairs`` (M, 2), i < j.
+
+    Each island is (members, local pairs): the sorted piece indices, and its pairs as
+    indices into members, shape (m, 2). Only islands of two or more pieces are returned,
+    ordered by their smallest index.
+    """
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if not len(pairs):
+        return []
+    labels = _roots(count, pairs)
+    sizes = np.bincount(labels, minlength=count)
+    order = np.argsort(labels, kind='stable')  # members of an island stay sorted
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    local = np.empty(count, dtype=np.int64)
+    pair_label = labels[pairs[:, 0]]
+    pair_order = np.argsort(pair_label, kind='stable')
+    pair_starts = np.concatenate([[0], np.cumsum(np.bincount(pair_label, minlength=count))])
+    islands = []
+    for root in np.flatnonzero(sizes > 1):
+        members = order[starts[root]:starts[root + 1]]
+        local[members] = np.arange(members.size)
+        own = pairs[pair_order[pair_starts[root]:pair_starts[root + 1]]]
+        islands.append((members, local[own]))
+    return islands

@@ -378,11 +378,11 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
              + 0.5 * params.model.g * dt * dt)
     pairs = contact_pairs(y[:, 0:3], reach)
     islands = islands_of(state.count, pairs)
-    uncoupled = sum(len(island) for island in islands if len(island) > MAX_ISLAND_PIECES)
-    islands = [island for island in islands if len(island) <= MAX_ISLAND_PIECES]
+    uncoupled = sum(len(members) for members, _ in islands if len(members) > MAX_ISLAND_PIECES)
+    islands = [island for island in islands if len(island[0]) <= MAX_ISLAND_PIECES]
     alone = np.ones(state.count, dtype=bool)
-    for island in islands:
-        alone[island] = False
+    for members, _ in islands:
+        alone[members] = False
     single = np.flatnonzero(alone)
     seg_t, seg_omega, seg_domega = profile.segments(state.t, t1)
     if single.size:
@@ -394,15 +394,10 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
         y[single], step_size[single], status[single], t_event[single] = ys, hs, st, te
         stats[single] = ss
     pull_off = params.model.interactions.pull_off
-    for island in islands:
-        members = [int(i) for i in island]
+    for members, local in islands:
         t_start = state.t
         h = float(step_size[members].min())
-        while members:
-            index = {g: k for k, g in enumerate(members)}
-            local = np.array([(index[int(i)], index[int(j)]) for i, j in pairs
-                              if int(i) in index and int(j) in index],
-                             dtype=np.int64).reshape(-1, 2)
+        while members.size:
             seg = profile.segments(t_start, t1)
             ys = np.ascontiguousarray(y[members])
             counters = np.zeros(stats.shape[1], dtype=np.int64)
@@ -418,10 +413,13 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
                 step_size[members] = h
                 break
             if code == EXITED:
-                gone = members.pop(int(first))
+                gone = members[first]
                 status[gone] = EXITED
                 t_event[gone] = t_reached
                 t_start = t_reached
+                members = np.delete(members, first)
+                local = local[(local != first).all(axis=1)]
+                local = local - (local > first)
                 continue
             status[members] = FAILED
             t_event[members] = t_reached

@@ -60,8 +60,33 @@ def resting(m: ModelParams, xy: list) -> np.ndarray:
 def test_islands_are_the_connected_pieces() -> None:
     pairs = np.array([[0, 3], [3, 5], [1, 2], [6, 7]])
     got = islands_of(9, pairs)
-    assert [list(g) for g in got] == [[0, 3, 5], [1, 2], [6, 7]]
+    assert [list(members) for members, _ in got] == [[0, 3, 5], [1, 2], [6, 7]]
+    assert [local.tolist() for _, local in got] == [[[0, 1], [1, 2]], [[0, 1]], [[0, 1]]]
     assert islands_of(4, np.empty((0, 2), dtype=np.int64)) == []
+    # against a plain search on random graphs
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        count = 30
+        pairs = np.unique(np.sort(rng.integers(0, count, (25, 2)), axis=1), axis=0)
+        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+        found = {tuple(members) for members, _ in islands_of(count, pairs)}
+        expected = set()
+        seen = set()
+        for start in range(count):
+            if start in seen:
+                continue
+            group, todo = {start}, [start]
+            while todo:
+                i = todo.pop()
+                for a, b in pairs:
+                    for u, v in ((a, b), (b, a)):
+                        if u == i and v not in group:
+                            group.add(v)
+                            todo.append(v)
+            seen |= group
+            if len(group) > 1:
+                expected.add(tuple(sorted(group)))
+        assert found == expected
 
 
 def test_contact_reach_covers_the_force() -> None:
