@@ -132,7 +132,6 @@ def main() -> None:
                   f'{r["max_ms"]:>8.1f}', flush=True)
 
 
-
 def compare(args: argparse.Namespace) -> None:
     """Print each state and count without and with contacts, side by side."""
     print('# pc-s/CPU-s without and with contact between pieces; cost ratio = with / '

@@ -41,7 +41,7 @@ from .params import G_EPS, P_M
 from .rosenbrock import (
     A21, A31, A32, A41, A42, A43, A51, A52, A53, A54, C2, C21, C3, C31, C32, C4, C41, C42,
     C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, ERROR_ORDER, GAMMA,
-    lu_factor, lu_solve)
+    factor3, lu_factor, lu_solve, solve3)
 
 __all__ = ['advance_island', 'islands_of']
 
@@ -129,61 +129,148 @@ def island_jacobian(y, products, pairs, machine, omega, domega, pull_off, jac, b
 
 
 @jit
+def island_factor(jac, alpha, lu, piv, s_lu, s_piv, t_mat):
+    """
+    Factor W = alpha I - J of an island through its velocities; False if singular.
+
+    The Jacobian's structure makes this exact: the position rows are dx/dt = w and the
+    filter rows couple a piece to itself only, so per piece k_x = (r_x + k_w)/alpha and
+    k_P = S^-1 (r_P + J_Px r_x/alpha) + T k_w with S = alpha I - J_PP and
+    T = S^-1 (J_Px/alpha + J_Pw). What is left is M k_w = r~, 3 n unknowns:
+    M_pq = delta_pq (alpha I - J_wP T_p) - (J_{w_p x_q}/alpha + J_{w_p w_q}).
+    lu (3 n, 3 n), piv (3 n,) receive M factored; s_lu (n, 3, 3), s_piv (n, 3) the
+    factored S; t_mat (n, 3, 3) the T of every piece.
+    """
+    n = s_lu.shape[0]
+    for p in range(n):
+        o = STATE_SIZE * p
+        for a in range(3):
+            for b in range(3):
+                s_lu[p, a, b] = -jac[o + 6 + a, o + 6 + b]
+            s_lu[p, a, a] += alpha
+        if not factor3(s_lu[p], s_piv[p]):
+            return False
+        for b in range(3):
+            t0, t1, t2 = solve3(s_lu[p], s_piv[p],
+                                jac[o + 6, o + b] / alpha + jac[o + 6, o + 3 + b],
+                                jac[o + 7, o + b] / alpha + jac[o + 7, o + 3 + b],
+                                jac[o + 8, o + b] / alpha + jac[o + 8, o + 3 + b])
+            t_mat[p, 0, b] = t0
+            t_mat[p, 1, b] = t1
+            t_mat[p, 2, b] = t2
+    for p in range(n):
+        op = STATE_SIZE * p
+        for q in range(n):
+            oq = STATE_SIZE * q
+            for a in range(3):
+                for b in range(3):
+                    lu[3 * p + a, 3 * q + b] = -(jac[op + 3 + a, oq + b] / alpha
+                                                 + jac[op + 3 + a, oq + 3 + b])
+        for a in range(3):
+            lu[3 * p + a, 3 * p + a] += alpha
+            for b in range(3):
+                acc = 0.0
+                for c in range(3):
+                    acc += jac[op + 3 + a, op + 6 + c] * t_mat[p, c, b]
+                lu[3 * p + a, 3 * p + b] -= acc
+    return lu_factor(lu, piv)
+
+
+@jit
+def island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, b):
+    """Solve W k = b in place in b (9 n,) with the factors of :func:`island_factor`."""
+    n = s_lu.shape[0]
+    for p in range(n):
+        o = STATE_SIZE * p
+        r0, r1, r2 = (b[o + 6], b[o + 7], b[o + 8])
+        for c in range(3):
+            x = b[o + c] / alpha
+            r0 += jac[o + 6, o + c] * x
+            r1 += jac[o + 7, o + c] * x
+            r2 += jac[o + 8, o + c] * x
+        u0, u1, u2 = solve3(s_lu[p], s_piv[p], r0, r1, r2)
+        u[p, 0] = u0
+        u[p, 1] = u1
+        u[p, 2] = u2
+    for p in range(n):
+        op = STATE_SIZE * p
+        for a in range(3):
+            acc = b[op + 3 + a]
+            for c in range(3):
+                acc += jac[op + 3 + a, op + 6 + c] * u[p, c]
+            for q in range(n):
+                oq = STATE_SIZE * q
+                for c in range(3):
+                    acc += jac[op + 3 + a, oq + c] * b[oq + c] / alpha
+            rhs_v[3 * p + a] = acc
+    lu_solve(lu, piv, rhs_v)
+    for p in range(n):
+        o = STATE_SIZE * p
+        for a in range(3):
+            kw = rhs_v[3 * p + a]
+            b[o + a] = (b[o + a] + kw) / alpha
+            b[o + 3 + a] = kw
+        for a in range(3):
+            acc = u[p, a]
+            for c in range(3):
+                acc += t_mat[p, a, c] * rhs_v[3 * p + c]
+            b[o + 6 + a] = acc
+
+
+@jit
 def island_step(y0, f0, ft, h, omega0, domega, products, pairs, machine, pull_off, jac, lu,
-                piv, k, ys, f, y1):
+                piv, k, ys, f, y1, s_lu, s_piv, t_mat, rhs_v, u):
     """
     Take one RODAS4 step of size h for the island; return False if W cannot be factored.
 
     Flat arrays: y0, f0, ft (time derivative of the field), ys, f, y1 (9 n,); k (6, 9 n)
-    the stages (row 5 the error estimate); jac (9 n, 9 n) the Jacobian at y0; lu a matrix
-    of the same shape receiving W = I/(gamma h) - J factored.
+    the stages (row 5 the error estimate); jac (9 n, 9 n) the Jacobian at y0. W = I/(gamma
+    h) - J is factored through the velocities (:func:`island_factor`): lu (3 n, 3 n), piv
+    (3 n,), s_lu (n, 3, 3), s_piv (n, 3), t_mat (n, 3, 3), rhs_v (3 n,) and u (n, 3) are
+    scratch.
     """
     size = y0.shape[0]
     n = size // STATE_SIZE
     alpha = 1.0 / (GAMMA * h)
-    for a in range(size):
-        for b in range(size):
-            lu[a, b] = -jac[a, b]
-        lu[a, a] += alpha
-    if not lu_factor(lu, piv):
+    if not island_factor(jac, alpha, lu, piv, s_lu, s_piv, t_mat):
         return False
     ys2 = ys.reshape(n, STATE_SIZE)
     f2 = f.reshape(n, STATE_SIZE)
     for i in range(size):
         k[0, i] = f0[i] + h * D1 * ft[i]
-    lu_solve(lu, piv, k[0])
+    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[0])
     for i in range(size):
         ys[i] = y0[i] + A21 * k[0, i]
     island_rhs(ys2, products, pairs, machine, omega0 + domega * C2 * h, domega, pull_off, f2)
     for i in range(size):
         k[1, i] = f[i] + h * D2 * ft[i] + C21 * k[0, i] / h
-    lu_solve(lu, piv, k[1])
+    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[1])
     for i in range(size):
         ys[i] = y0[i] + A31 * k[0, i] + A32 * k[1, i]
     island_rhs(ys2, products, pairs, machine, omega0 + domega * C3 * h, domega, pull_off, f2)
     for i in range(size):
         k[2, i] = f[i] + h * D3 * ft[i] + (C31 * k[0, i] + C32 * k[1, i]) / h
-    lu_solve(lu, piv, k[2])
+    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[2])
     for i in range(size):
         ys[i] = y0[i] + A41 * k[0, i] + A42 * k[1, i] + A43 * k[2, i]
     island_rhs(ys2, products, pairs, machine, omega0 + domega * C4 * h, domega, pull_off, f2)
     for i in range(size):
         k[3, i] = f[i] + h * D4 * ft[i] + (C41 * k[0, i] + C42 * k[1, i] + C43 * k[2, i]) / h
-    lu_solve(lu, piv, k[3])
+    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[3])
     for i in range(size):
         ys[i] = y0[i] + A51 * k[0, i] + A52 * k[1, i] + A53 * k[2, i] + A54 * k[3, i]
     omega1 = omega0 + domega * h
     island_rhs(ys2, products, pairs, machine, omega1, domega, pull_off, f2)
     for i in range(size):
         k[4, i] = f[i] + (C51 * k[0, i] + C52 * k[1, i] + C53 * k[2, i] + C54 * k[3, i]) / h
-    lu_solve(lu, piv, k[4])
+    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[4])
     for i in range(size):
         ys[i] += k[4, i]
     island_rhs(ys2, products, pairs, machine, omega1, domega, pull_off, f2)
     for i in range(size):
         k[5, i] = f[i] + (C61 * k[0, i] + C62 * k[1, i] + C63 * k[2, i] + C64 * k[3, i]
                           + C65 * k[4, i]) / h
-    lu_solve(lu, piv, k[5])
+    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[5])
     for i in range(size):
         y1[i] = ys[i] + k[5, i]
     return True
@@ -205,8 +292,13 @@ def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_
     size = STATE_SIZE * n
     flat = y.reshape(size)
     jac = np.empty((size, size))
-    lu = np.empty((size, size))
-    piv = np.empty(size, dtype=np.int64)
+    lu = np.empty((3 * n, 3 * n))
+    piv = np.empty(3 * n, dtype=np.int64)
+    s_lu = np.empty((n, 3, 3))
+    s_piv = np.empty((n, 3), dtype=np.int64)
+    t_mat = np.empty((n, 3, 3))
+    rhs_v = np.empty(3 * n)
+    u = np.empty((n, 3))
     k = np.empty((6, size))
     ys = np.empty(size)
     f = np.empty(size)
@@ -250,7 +342,8 @@ def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_
                     ft[i] *= domega
                 fresh = False
             ok = island_step(flat, f0, ft, h, omega0, domega, products, pairs, machine,
-                             pull_off, jac, lu, piv, k, ys, f, y1)
+                             pull_off, jac, lu, piv, k, ys, f, y1, s_lu, s_piv, t_mat,
+                             rhs_v, u)
             err = error_norm(k[5], flat, y1, rtol, atol_flat) if ok else np.inf
             steps += 1
             if steps > max_steps:
@@ -283,7 +376,8 @@ def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_
             if first >= 0:
                 h_exit = theta * h
                 ok = island_step(flat, f0, ft, h_exit, omega0, domega, products, pairs,
-                                 machine, pull_off, jac, lu, piv, k, ys, f, y1)
+                                 machine, pull_off, jac, lu, piv, k, ys, f, y1, s_lu, s_piv,
+                                 t_mat, rhs_v, u)
                 if not ok:
                     stats[STAT_REASON] = REASON_NOT_FINITE
                     return FAILED, t, h_prop, -1
