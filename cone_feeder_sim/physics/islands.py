@@ -40,8 +40,8 @@ from .model import jacobian, rhs, rhs_omega_derivative, STATE_SIZE
 from .params import G_EPS, P_M
 from .rosenbrock import (
     A21, A31, A32, A41, A42, A43, A51, A52, A53, A54, C2, C21, C3, C31, C32, C4, C41, C42,
-    C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, ERROR_ORDER, GAMMA,
-    factor3, lu_factor, lu_solve, solve3)
+    C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, ERROR_ORDER, factor3,
+    GAMMA, lu_factor, lu_solve, solve3)
 
 __all__ = ['advance_island', 'islands_of']
 
