@@ -526,7 +526,8 @@ def warm_up() -> None:
     """
     Compile (or load from numba's cache) the integration kernel now, not inside a tick.
 
-    Runs a tiny integration of one piece with the default parameters: the kernel's
+    Runs a tiny integration of one piece with the default parameters, then of two touching
+    pieces with interactions on (the contact kernels): the kernel's
     signature depends on the kinds of arrays, which are the same for every run (SimParams
     makes the same read-only rows whatever the values), so this loads exactly the kernel a
     run calls, and cannot fail on a run's own parameters. A first call after an install
@@ -538,4 +539,11 @@ def warm_up() -> None:
     x = 0.5 * model.r
     start = (x, 0.0, resting_height(model, model.product, x, 0.0))
     state, _ = add_particles(SimState(), params, [start], None, None, omega=0.0)
+    advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
+    # the contact kernels (neighbour search, islands) with two touching pieces
+    touching = replace(params.model, interactions=replace(params.model.interactions,
+                                                          enabled=True))
+    params = SimParams(model=touching, solver=params.solver)
+    other = (x + 0.04, 0.0, resting_height(model, model.product, x + 0.04, 0.0))
+    state, _ = add_particles(SimState(), params, [start, other], None, None, omega=0.0)
     advance(state, params, RotationProfile.constant(1.0), 1.0e-3)

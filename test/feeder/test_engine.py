@@ -21,7 +21,7 @@ from cone_feeder_sim.feeder.engine import (
     drive_profile, DriveParams, EngineConfig, FeederEngine, FeedParams, MAX_PENDING_INPUTS,
     pattern_from_flat, PieceSpec, Reconfigure, ResetRequest, RotationCommand, SpawnRequest)
 from cone_feeder_sim.physics.integrator import advance_batch
-from cone_feeder_sim.physics.params import ModelParams, SolverParams
+from cone_feeder_sim.physics.params import InteractionParams, ModelParams, SolverParams
 from cone_feeder_sim.physics.simulation import resting_height
 import numpy as np
 import pytest
@@ -487,3 +487,16 @@ def test_no_kernel_is_compiled_inside_a_tick() -> None:
     for _ in range(30):
         eng.tick()
     assert list(advance_batch.signatures) == loaded
+
+
+def test_no_contact_kernel_is_compiled_inside_a_tick() -> None:
+    from cone_feeder_sim.physics.islands import advance_island
+    from cone_feeder_sim.physics.neighbours import _contact_pairs
+    eng = engine(model=ModelParams(interactions=InteractionParams(enabled=True)),
+                 feed=FeedParams(rate=100.0))
+    loaded = (list(advance_island.signatures), list(_contact_pairs.signatures))
+    assert all(loaded)  # the engine loaded them when built
+    eng.spawn([resting(0.1, 0.0), resting(0.14, 0.0)])
+    for _ in range(30):
+        eng.tick()
+    assert (list(advance_island.signatures), list(_contact_pairs.signatures)) == loaded
