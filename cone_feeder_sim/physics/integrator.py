@@ -81,6 +81,36 @@ def step_factor(err):
 
 
 @jit
+def proposal_after_rejection(h, err, repeated):
+    """Return the next trial step (s) after a step of h (s) was rejected with error err."""
+    if math.isfinite(err):
+        h_prop = h * max(FAC_MIN, SAFETY * err ** (-1.0 / (ERROR_ORDER + 1)))
+    else:
+        h_prop = h * FAC_MIN
+    if repeated:  # repeated rejection: the error model does not hold, cut hard
+        h_prop = min(h_prop, h * FAC_MIN)
+    return h_prop
+
+
+@jit
+def growth_after_acceptance(h, err, h_acc, err_acc, after_rejection):
+    """
+    Return the factor for the next step after an accepted step h (s) with error err.
+
+    Predictive (Gustafsson) control: h_acc and err_acc are the previous accepted step and
+    its error (h_acc 0: none yet); no growth right after a rejection.
+    """
+    grow = step_factor(err)
+    if h_acc > 0.0 and err > 0.0:
+        # also use the error trend of the last two accepted steps
+        pred = SAFETY * (h / h_acc) * (err_acc / (err * err)) ** (1.0 / (ERROR_ORDER + 1))
+        grow = min(grow, max(FAC_MIN, min(FAC_MAX, pred)))
+    if after_rejection:
+        grow = min(grow, 1.0)
+    return grow
+
+
+@jit
 def hermite_position(theta, h, xa, wa, xb, wb, i):
     """Return component i of the cubic Hermite interpolant of positions at fraction theta."""
     t2 = theta * theta
@@ -163,12 +193,7 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
                 return FAILED, t, h_prop
             if not (err <= 1.0):
                 stats[STAT_REJECTED] += 1
-                if math.isfinite(err):
-                    h_prop = h * max(FAC_MIN, SAFETY * err ** (-1.0 / (ERROR_ORDER + 1)))
-                else:
-                    h_prop = h * FAC_MIN
-                if rejected:  # repeated rejection: the error model does not hold, cut hard
-                    h_prop = min(h_prop, h * FAC_MIN)
+                h_prop = proposal_after_rejection(h, err, rejected)
                 rejected = True
                 if h_prop < h_min:
                     stats[STAT_REASON] = (REASON_NOT_FINITE if not math.isfinite(err)
@@ -189,14 +214,7 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
             for i in range(y.shape[0]):
                 y[i] = y1[i]
             fresh = True
-            grow = step_factor(err)
-            if h_acc > 0.0 and err > 0.0:
-                # Gustafsson: also use the error trend of the last two accepted steps
-                pred = SAFETY * (h / h_acc) * (err_acc / (err * err)) ** (
-                    1.0 / (ERROR_ORDER + 1))
-                grow = min(grow, max(FAC_MIN, min(FAC_MAX, pred)))
-            if rejected:
-                grow = min(grow, 1.0)
+            grow = growth_after_acceptance(h, err, h_acc, err_acc, rejected)
             rejected = False
             h_acc = h
             err_acc = max(err, 1e-4)

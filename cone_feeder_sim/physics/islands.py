@@ -33,14 +33,14 @@ import numpy as np
 
 from .contact import pair_force
 from .integrator import (
-    ACTIVE, error_norm, EXITED, FAC_MAX, FAC_MIN, FAILED, locate_exit, REASON_NOT_FINITE,
-    REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS, SAFETY, STAT_ACCEPTED, STAT_REASON,
-    STAT_REJECTED, step_factor)
+    ACTIVE, error_norm, EXITED, FAILED, growth_after_acceptance, locate_exit,
+    proposal_after_rejection, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS,
+    STAT_ACCEPTED, STAT_REASON, STAT_REJECTED)
 from .model import jacobian, rhs, rhs_omega_derivative, STATE_SIZE
 from .params import G_EPS, P_M
 from .rosenbrock import (
     A21, A31, A32, A41, A42, A43, A51, A52, A53, A54, C2, C21, C3, C31, C32, C4, C41, C42,
-    C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, ERROR_ORDER, factor3,
+    C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, factor3,
     GAMMA, lu_factor, lu_solve, solve3)
 
 __all__ = ['advance_island', 'islands_of']
@@ -351,12 +351,7 @@ def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_
                 return FAILED, t, h_prop, -1
             if not (err <= 1.0):
                 stats[STAT_REJECTED] += 1
-                if math.isfinite(err):
-                    h_prop = h * max(FAC_MIN, SAFETY * err ** (-1.0 / (ERROR_ORDER + 1)))
-                else:
-                    h_prop = h * FAC_MIN
-                if rejected:
-                    h_prop = min(h_prop, h * FAC_MIN)
+                h_prop = proposal_after_rejection(h, err, rejected)
                 rejected = True
                 if h_prop < h_min:
                     stats[STAT_REASON] = (REASON_NOT_FINITE if not math.isfinite(err)
@@ -387,13 +382,7 @@ def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_
             for i in range(size):
                 flat[i] = y1[i]
             fresh = True
-            grow = step_factor(err)
-            if h_acc > 0.0 and err > 0.0:
-                pred = SAFETY * (h / h_acc) * (err_acc / (err * err)) ** (
-                    1.0 / (ERROR_ORDER + 1))
-                grow = min(grow, max(FAC_MIN, min(FAC_MAX, pred)))
-            if rejected:
-                grow = min(grow, 1.0)
+            grow = growth_after_acceptance(h, err, h_acc, err_acc, rejected)
             rejected = False
             h_acc = h
             err_acc = max(err, 1e-4)
