@@ -20,10 +20,15 @@ An island is a set of pieces connected through pairs within reach (see
 in cone axes; its vector field is every piece's own field (:func:`model.rhs`) plus the
 pair forces of :func:`contact.pair_force`, equal and opposite. The island is advanced with
 the same RODAS4 method, step control, kink handling and exit location as a single piece
-(:mod:`integrator`), with a dense Jacobian: the pieces' exact blocks plus the pair blocks
-by central differences, built equal and opposite so that a step keeps the pair forces'
-momentum balance to round-off. The pair forces are therefore integrated implicitly, with
-the error the step control measures; there is no splitting error.
+(:mod:`integrator`), with the exact Jacobian in blocks: the pieces' own blocks plus one
+block per pair by central differences, built equal and opposite so that a step keeps the
+pair forces' momentum balance to round-off. The pair forces are therefore integrated
+implicitly, with the error the step control measures; there is no splitting error.
+
+The linear systems are solved through the velocities (3 n unknowns), banded in an order
+where touching pieces are close (:mod:`band`): a crowd of n pieces in one layer costs
+O(n w^2) per step, w the band width in pieces, instead of O(n^3), so no island is too
+large to be coupled.
 """
 
 import math
@@ -31,6 +36,7 @@ import math
 import numba
 import numpy as np
 
+from .band import band_factor, band_solve
 from .contact import pair_force
 from .integrator import (
     ACTIVE, error_norm, EXITED, FAILED, growth_after_acceptance, locate_exit,
@@ -41,7 +47,7 @@ from .params import G_EPS, P_M
 from .rosenbrock import (
     A21, A31, A32, A41, A42, A43, A51, A52, A53, A54, C2, C21, C3, C31, C32, C4, C41, C42,
     C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, factor3,
-    GAMMA, lu_factor, lu_solve, solve3)
+    GAMMA, solve3)
 
 __all__ = ['advance_island', 'islands_of']
 
@@ -74,62 +80,61 @@ def island_rhs(y, products, pairs, machine, omega, domega, pull_off, out):
 
 
 @jit
-def island_jacobian(y, products, pairs, machine, omega, domega, pull_off, jac, block, pert):
+def island_jacobian(y, products, pairs, machine, omega, domega, pull_off, own, pair_jac,
+                    xi, wi):
     """
-    Write the island's Jacobian, shape (9 n, 9 n), into jac.
+    Write the island's Jacobian in blocks: own (n, 9, 9) and pair_jac (m, 3, 6).
 
-    block (9, 9) and pert (2, 6) are scratch. The pair force depends on the differences of
-    the two pieces' positions and velocities only, so one 3x6 block of central differences
-    serves all four places, with the signs and masses of the force balance.
+    own[p] is piece p's own block d(f_p)/d(y_p), its pairs' forces included; pair_jac[q]
+    is d(F)/d(x_i, w_i) of pair q = (i, j), by central differences. The pair force depends
+    on the differences of the two pieces' positions and velocities only, so this one block
+    gives all four places, with the signs and masses of the force balance:
+    d(f_i)/d(y_j) = -G/m_i and d(f_j)/d(y_i) = -G/m_j in the velocity rows. xi, wi (3,)
+    are scratch.
     """
     n = y.shape[0]
-    size = STATE_SIZE * n
-    for a in range(size):
-        for b in range(size):
-            jac[a, b] = 0.0
     for p in range(n):
-        jacobian(y[p], products[p], machine, omega, domega, block)
-        o = STATE_SIZE * p
-        for a in range(STATE_SIZE):
-            for b in range(STATE_SIZE):
-                jac[o + a, o + b] = block[a, b]
+        jacobian(y[p], products[p], machine, omega, domega, own[p])
     eps = machine[G_EPS]
-    xi = np.empty(3)
-    wi = np.empty(3)
     for q in range(pairs.shape[0]):
         i = pairs[q, 0]
         j = pairs[q, 1]
         mi = products[i, P_M]
         mj = products[j, P_M]
         for c in range(6):  # derivative with respect to component c of (x_i, w_i)
-            for s in range(2):
-                for m in range(3):
-                    xi[m] = y[i, m]
-                    wi[m] = y[i, 3 + m]
-                delta = FD_STEP * max(abs(y[i, c]), 1e-3 if c < 3 else 1e-2)
-                sign = 1.0 if s == 0 else -1.0
-                if c < 3:
-                    xi[c] += sign * delta
-                else:
-                    wi[c - 3] += sign * delta
-                f0, f1, f2 = pair_force(xi, wi, products[i], y[j, 0:3], y[j, 3:6],
-                                        products[j], pull_off, eps)
-                if s == 0:
-                    pert[0, 0] = f0
-                    pert[0, 1] = f1
-                    pert[0, 2] = f2
-                else:
-                    for m in range(3):
-                        g = ((pert[0, m] - (f0 if m == 0 else (f1 if m == 1 else f2)))
-                             / (2.0 * delta))
-                        jac[STATE_SIZE * i + 3 + m, STATE_SIZE * i + c] += g / mi
-                        jac[STATE_SIZE * i + 3 + m, STATE_SIZE * j + c] -= g / mi
-                        jac[STATE_SIZE * j + 3 + m, STATE_SIZE * i + c] -= g / mj
-                        jac[STATE_SIZE * j + 3 + m, STATE_SIZE * j + c] += g / mj
+            delta = FD_STEP * max(abs(y[i, c]), 1e-3 if c < 3 else 1e-2)
+            for m in range(3):
+                xi[m] = y[i, m]
+                wi[m] = y[i, 3 + m]
+            if c < 3:
+                xi[c] += delta
+            else:
+                wi[c - 3] += delta
+            p0, p1, p2 = pair_force(xi, wi, products[i], y[j, 0:3], y[j, 3:6], products[j],
+                                    pull_off, eps)
+            if c < 3:
+                xi[c] -= 2.0 * delta
+            else:
+                wi[c - 3] -= 2.0 * delta
+            m0, m1, m2 = pair_force(xi, wi, products[i], y[j, 0:3], y[j, 3:6], products[j],
+                                    pull_off, eps)
+            g0 = (p0 - m0) / (2.0 * delta)
+            g1 = (p1 - m1) / (2.0 * delta)
+            g2 = (p2 - m2) / (2.0 * delta)
+            pair_jac[q, 0, c] = g0
+            pair_jac[q, 1, c] = g1
+            pair_jac[q, 2, c] = g2
+            own[i, 3, c] += g0 / mi
+            own[i, 4, c] += g1 / mi
+            own[i, 5, c] += g2 / mi
+            own[j, 3, c] += g0 / mj
+            own[j, 4, c] += g1 / mj
+            own[j, 5, c] += g2 / mj
 
 
 @jit
-def island_factor(jac, alpha, lu, piv, s_lu, s_piv, t_mat):
+def island_factor(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu, s_piv,
+                  t_mat):
     """
     Factor W = alpha I - J of an island through its velocities; False if singular.
 
@@ -137,153 +142,186 @@ def island_factor(jac, alpha, lu, piv, s_lu, s_piv, t_mat):
     filter rows couple a piece to itself only, so per piece k_x = (r_x + k_w)/alpha and
     k_P = S^-1 (r_P + J_Px r_x/alpha) + T k_w with S = alpha I - J_PP and
     T = S^-1 (J_Px/alpha + J_Pw). What is left is M k_w = r~, 3 n unknowns:
-    M_pq = delta_pq (alpha I - J_wP T_p) - (J_{w_p x_q}/alpha + J_{w_p w_q}).
-    lu (3 n, 3 n), piv (3 n,) receive M factored; s_lu (n, 3, 3), s_piv (n, 3) the
-    factored S; t_mat (n, 3, 3) the T of every piece.
+    M_pq = delta_pq (alpha I - J_wP T_p) - (J_{w_p x_q}/alpha + J_{w_p w_q}), non-zero off
+    the diagonal only for pieces in a pair. Piece p's unknowns are rows 3 pos[p] ... + 2 of
+    M, held banded (:mod:`band`) with kl sub-diagonals in ab (3 n, 3 kl + 1); piv (3 n,).
+    s_lu (n, 3, 3), s_piv (n, 3) receive the factored S; t_mat (n, 3, 3) the T of every
+    piece. Blocks as written by :func:`island_jacobian`.
     """
     n = s_lu.shape[0]
+    for r in range(ab.shape[0]):
+        for c in range(ab.shape[1]):
+            ab[r, c] = 0.0
     for p in range(n):
-        o = STATE_SIZE * p
+        blk = own[p]
         for a in range(3):
             for b in range(3):
-                s_lu[p, a, b] = -jac[o + 6 + a, o + 6 + b]
+                s_lu[p, a, b] = -blk[6 + a, 6 + b]
             s_lu[p, a, a] += alpha
         if not factor3(s_lu[p], s_piv[p]):
             return False
         for b in range(3):
             t0, t1, t2 = solve3(s_lu[p], s_piv[p],
-                                jac[o + 6, o + b] / alpha + jac[o + 6, o + 3 + b],
-                                jac[o + 7, o + b] / alpha + jac[o + 7, o + 3 + b],
-                                jac[o + 8, o + b] / alpha + jac[o + 8, o + 3 + b])
+                                blk[6, b] / alpha + blk[6, 3 + b],
+                                blk[7, b] / alpha + blk[7, 3 + b],
+                                blk[8, b] / alpha + blk[8, 3 + b])
             t_mat[p, 0, b] = t0
             t_mat[p, 1, b] = t1
             t_mat[p, 2, b] = t2
-    for p in range(n):
-        op = STATE_SIZE * p
-        for q in range(n):
-            oq = STATE_SIZE * q
-            for a in range(3):
-                for b in range(3):
-                    lu[3 * p + a, 3 * q + b] = -(jac[op + 3 + a, oq + b] / alpha
-                                                 + jac[op + 3 + a, oq + 3 + b])
+        o = 3 * pos[p]
         for a in range(3):
-            lu[3 * p + a, 3 * p + a] += alpha
             for b in range(3):
-                acc = 0.0
+                acc = -(blk[3 + a, b] / alpha + blk[3 + a, 3 + b])
                 for c in range(3):
-                    acc += jac[op + 3 + a, op + 6 + c] * t_mat[p, c, b]
-                lu[3 * p + a, 3 * p + b] -= acc
-    return lu_factor(lu, piv)
+                    acc -= blk[3 + a, 6 + c] * t_mat[p, c, b]
+                if a == b:
+                    acc += alpha
+                ab[o + a, b - a + kl] = acc
+    for q in range(pairs.shape[0]):
+        i = pairs[q, 0]
+        j = pairs[q, 1]
+        oi = 3 * pos[i]
+        oj = 3 * pos[j]
+        mi = products[i, P_M]
+        mj = products[j, P_M]
+        for a in range(3):
+            for b in range(3):
+                g = pair_jac[q, a, b] / alpha + pair_jac[q, a, 3 + b]
+                ab[oi + a, oj + b - oi - a + kl] += g / mi
+                ab[oj + a, oi + b - oj - a + kl] += g / mj
+    return band_factor(ab, piv, kl)
 
 
 @jit
-def island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, b):
+def island_solve(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu, s_piv,
+                 t_mat, rhs_v, u, b):
     """Solve W k = b in place in b (9 n,) with the factors of :func:`island_factor`."""
     n = s_lu.shape[0]
     for p in range(n):
+        blk = own[p]
         o = STATE_SIZE * p
         r0, r1, r2 = (b[o + 6], b[o + 7], b[o + 8])
         for c in range(3):
             x = b[o + c] / alpha
-            r0 += jac[o + 6, o + c] * x
-            r1 += jac[o + 7, o + c] * x
-            r2 += jac[o + 8, o + c] * x
+            r0 += blk[6, c] * x
+            r1 += blk[7, c] * x
+            r2 += blk[8, c] * x
         u0, u1, u2 = solve3(s_lu[p], s_piv[p], r0, r1, r2)
         u[p, 0] = u0
         u[p, 1] = u1
         u[p, 2] = u2
-    for p in range(n):
-        op = STATE_SIZE * p
+        ov = 3 * pos[p]
         for a in range(3):
-            acc = b[op + 3 + a]
+            acc = b[o + 3 + a]
             for c in range(3):
-                acc += jac[op + 3 + a, op + 6 + c] * u[p, c]
-            for q in range(n):
-                oq = STATE_SIZE * q
-                for c in range(3):
-                    acc += jac[op + 3 + a, oq + c] * b[oq + c] / alpha
-            rhs_v[3 * p + a] = acc
-    lu_solve(lu, piv, rhs_v)
+                acc += blk[3 + a, 6 + c] * u[p, c] + blk[3 + a, c] * b[o + c] / alpha
+            rhs_v[ov + a] = acc
+    for q in range(pairs.shape[0]):
+        i = pairs[q, 0]
+        j = pairs[q, 1]
+        oi = STATE_SIZE * i
+        oj = STATE_SIZE * j
+        mi = products[i, P_M]
+        mj = products[j, P_M]
+        for a in range(3):
+            acc_i = 0.0
+            acc_j = 0.0
+            for c in range(3):
+                acc_i += pair_jac[q, a, c] * b[oj + c]
+                acc_j += pair_jac[q, a, c] * b[oi + c]
+            rhs_v[3 * pos[i] + a] -= acc_i / (alpha * mi)
+            rhs_v[3 * pos[j] + a] -= acc_j / (alpha * mj)
+    band_solve(ab, piv, kl, rhs_v)
     for p in range(n):
         o = STATE_SIZE * p
+        ov = 3 * pos[p]
         for a in range(3):
-            kw = rhs_v[3 * p + a]
+            kw = rhs_v[ov + a]
             b[o + a] = (b[o + a] + kw) / alpha
             b[o + 3 + a] = kw
         for a in range(3):
             acc = u[p, a]
             for c in range(3):
-                acc += t_mat[p, a, c] * rhs_v[3 * p + c]
+                acc += t_mat[p, a, c] * rhs_v[ov + c]
             b[o + 6 + a] = acc
 
 
 @jit
-def island_step(y0, f0, ft, h, omega0, domega, products, pairs, machine, pull_off, jac, lu,
-                piv, k, ys, f, y1, s_lu, s_piv, t_mat, rhs_v, u):
+def island_step(y0, f0, ft, h, omega0, domega, products, pairs, machine, pull_off, own,
+                pair_jac, pos, kl, ab, piv, k, ys, f, y1, s_lu, s_piv, t_mat, rhs_v, u):
     """
     Take one RODAS4 step of size h for the island; return False if W cannot be factored.
 
     Flat arrays: y0, f0, ft (time derivative of the field), ys, f, y1 (9 n,); k (6, 9 n)
-    the stages (row 5 the error estimate); jac (9 n, 9 n) the Jacobian at y0. W = I/(gamma
-    h) - J is factored through the velocities (:func:`island_factor`): lu (3 n, 3 n), piv
-    (3 n,), s_lu (n, 3, 3), s_piv (n, 3), t_mat (n, 3, 3), rhs_v (3 n,) and u (n, 3) are
-    scratch.
+    the stages (row 5 the error estimate); own, pair_jac the Jacobian at y0 in blocks
+    (:func:`island_jacobian`). W = I/(gamma h) - J is factored through the velocities
+    (:func:`island_factor`, band order pos, kl): ab (3 n, 3 kl + 1), piv (3 n,), s_lu
+    (n, 3, 3), s_piv (n, 3), t_mat (n, 3, 3), rhs_v (3 n,) and u (n, 3) are scratch.
     """
     size = y0.shape[0]
     n = size // STATE_SIZE
     alpha = 1.0 / (GAMMA * h)
-    if not island_factor(jac, alpha, lu, piv, s_lu, s_piv, t_mat):
+    if not island_factor(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu, s_piv,
+                         t_mat):
         return False
     ys2 = ys.reshape(n, STATE_SIZE)
     f2 = f.reshape(n, STATE_SIZE)
     for i in range(size):
         k[0, i] = f0[i] + h * D1 * ft[i]
-    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[0])
+    island_solve(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu, s_piv, t_mat,
+                 rhs_v, u, k[0])
     for i in range(size):
         ys[i] = y0[i] + A21 * k[0, i]
     island_rhs(ys2, products, pairs, machine, omega0 + domega * C2 * h, domega, pull_off, f2)
     for i in range(size):
         k[1, i] = f[i] + h * D2 * ft[i] + C21 * k[0, i] / h
-    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[1])
+    island_solve(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu, s_piv, t_mat,
+                 rhs_v, u, k[1])
     for i in range(size):
         ys[i] = y0[i] + A31 * k[0, i] + A32 * k[1, i]
     island_rhs(ys2, products, pairs, machine, omega0 + domega * C3 * h, domega, pull_off, f2)
     for i in range(size):
         k[2, i] = f[i] + h * D3 * ft[i] + (C31 * k[0, i] + C32 * k[1, i]) / h
-    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[2])
+    island_solve(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu, s_piv, t_mat,
+                 rhs_v, u, k[2])
     for i in range(size):
         ys[i] = y0[i] + A41 * k[0, i] + A42 * k[1, i] + A43 * k[2, i]
     island_rhs(ys2, products, pairs, machine, omega0 + domega * C4 * h, domega, pull_off, f2)
     for i in range(size):
         k[3, i] = f[i] + h * D4 * ft[i] + (C41 * k[0, i] + C42 * k[1, i] + C43 * k[2, i]) / h
-    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[3])
+    island_solve(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu, s_piv, t_mat,
+                 rhs_v, u, k[3])
     for i in range(size):
         ys[i] = y0[i] + A51 * k[0, i] + A52 * k[1, i] + A53 * k[2, i] + A54 * k[3, i]
     omega1 = omega0 + domega * h
     island_rhs(ys2, products, pairs, machine, omega1, domega, pull_off, f2)
     for i in range(size):
         k[4, i] = f[i] + (C51 * k[0, i] + C52 * k[1, i] + C53 * k[2, i] + C54 * k[3, i]) / h
-    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[4])
+    island_solve(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu, s_piv, t_mat,
+                 rhs_v, u, k[4])
     for i in range(size):
         ys[i] += k[4, i]
     island_rhs(ys2, products, pairs, machine, omega1, domega, pull_off, f2)
     for i in range(size):
         k[5, i] = f[i] + (C61 * k[0, i] + C62 * k[1, i] + C63 * k[2, i] + C64 * k[3, i]
                           + C65 * k[4, i]) / h
-    island_solve(jac, alpha, lu, piv, s_lu, s_piv, t_mat, rhs_v, u, k[5])
+    island_solve(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu, s_piv, t_mat,
+                 rhs_v, u, k[5])
     for i in range(size):
         y1[i] = ys[i] + k[5, i]
     return True
 
 
 @jit
-def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_exit, h_prop,
-                   rtol, atol, h_min, h_max, h_kink, max_steps, pull_off, stats):
+def advance_island(y, products, pairs, pos, kl, machine, seg_t, seg_omega, seg_domega, r_exit,
+                   h_prop, rtol, atol, h_min, h_max, h_kink, max_steps, pull_off, stats):
     """
     Advance an island through the segments, or until one of its pieces exits, or it fails.
 
     y (n, 9) cone-axes states, updated in place; products (n, PRODUCT_WIDTH); pairs (m, 2)
-    int64 local indices; atol (9,); stats (STAT_WIDTH,) int64 counters of the island. The
+    int64 local indices; pos (n,) int64 and kl the band order of the velocity system:
+    piece p's unknowns are rows 3 pos[p] ... + 2, with at most kl (>= 2) sub-diagonals
+    (:func:`band.band_order`: kl = 3 width + 2); atol (9,); stats (STAT_WIDTH,) int64 counters of the island. The
     step control is that of :func:`integrator.advance_particle`. Returns (status, t,
     h_prop, piece): ACTIVE with the end time; EXITED with the exit time of ``piece`` (y then
     holds every piece's state at that time); FAILED with the time reached.
@@ -291,8 +329,11 @@ def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_
     n = y.shape[0]
     size = STATE_SIZE * n
     flat = y.reshape(size)
-    jac = np.empty((size, size))
-    lu = np.empty((3 * n, 3 * n))
+    m = pairs.shape[0]
+    own = np.empty((n, STATE_SIZE, STATE_SIZE))
+    pair_jac = np.empty((m, 3, 6))
+    kl = min(kl, 3 * n - 1)
+    ab = np.empty((3 * n, 3 * kl + 1))
     piv = np.empty(3 * n, dtype=np.int64)
     s_lu = np.empty((n, 3, 3))
     s_piv = np.empty((n, 3), dtype=np.int64)
@@ -305,8 +346,8 @@ def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_
     f0 = np.empty(size)
     ft = np.empty(size)
     y1 = np.empty(size)
-    block = np.empty((STATE_SIZE, STATE_SIZE))
-    pert = np.empty((2, 6))
+    xi = np.empty(3)
+    wi = np.empty(3)
     atol_flat = np.empty(size)
     for i in range(size):
         atol_flat[i] = atol[i % STATE_SIZE]
@@ -334,16 +375,16 @@ def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_
             omega0 = omega_s + domega * (t - t_seg)
             if fresh:
                 island_rhs(y, products, pairs, machine, omega0, domega, pull_off, f0_2)
-                island_jacobian(y, products, pairs, machine, omega0, domega, pull_off, jac,
-                                block, pert)
+                island_jacobian(y, products, pairs, machine, omega0, domega, pull_off, own,
+                                pair_jac, xi, wi)
                 for p in range(n):
                     rhs_omega_derivative(y[p], omega0, ft_2[p])
                 for i in range(size):
                     ft[i] *= domega
                 fresh = False
             ok = island_step(flat, f0, ft, h, omega0, domega, products, pairs, machine,
-                             pull_off, jac, lu, piv, k, ys, f, y1, s_lu, s_piv, t_mat,
-                             rhs_v, u)
+                             pull_off, own, pair_jac, pos, kl, ab, piv, k, ys, f, y1, s_lu,
+                             s_piv, t_mat, rhs_v, u)
             err = error_norm(k[5], flat, y1, rtol, atol_flat) if ok else np.inf
             steps += 1
             if steps > max_steps:
@@ -371,8 +412,8 @@ def advance_island(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_
             if first >= 0:
                 h_exit = theta * h
                 ok = island_step(flat, f0, ft, h_exit, omega0, domega, products, pairs,
-                                 machine, pull_off, jac, lu, piv, k, ys, f, y1, s_lu, s_piv,
-                                 t_mat, rhs_v, u)
+                                 machine, pull_off, own, pair_jac, pos, kl, ab, piv, k, ys, f,
+                                 y1, s_lu, s_piv, t_mat, rhs_v, u)
                 if not ok:
                     stats[STAT_REASON] = REASON_NOT_FINITE
                     return FAILED, t, h_prop, -1

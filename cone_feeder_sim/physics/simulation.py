@@ -33,6 +33,7 @@ import numpy as np
 from .integrator import (
     ACTIVE, advance_batch, EXITED, FAILED, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW,
     REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED, STAT_WIDTH)
+from .band import band_order
 from .islands import advance_island, islands_of
 from .model import STATE_SIZE
 from .neighbours import contact_pairs
@@ -138,14 +139,15 @@ class StepStats:
     """
     Solver statistics of one interval: accepted and rejected steps over all particles.
 
-    uncoupled: pieces of contact islands larger than MAX_ISLAND_PIECES, which were advanced
-    without their contacts in this interval (they may pass through each other).
+    largest_island: pieces in the largest contact island of the interval (0 without
+    contact). An island takes the steps its most demanding piece needs, so this is what
+    makes a crowded interval expensive.
     """
 
     accepted: int
     rejected: int
     particles: int
-    uncoupled: int = 0
+    largest_island: int = 0
 
 
 @dataclass(frozen=True)
@@ -309,9 +311,9 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     stats = np.zeros((n, STAT_WIDTH), dtype=np.int64)
     solver = params.solver
     interactions = params.model.interactions
-    uncoupled = 0
+    largest_island = 0
     if interactions.enabled and n > 1:
-        uncoupled = _advance_with_contacts(state, params, profile, t1, y, step_size, status,
+        largest_island = _advance_with_contacts(state, params, profile, t1, y, step_size, status,
                                            t_event, stats)
     elif n:
         advance_batch(y, state.products, params.global_row, seg_t, seg_omega, seg_domega,
@@ -328,14 +330,9 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
                         step_size=step_size[keep])
     step_stats = StepStats(accepted=int(stats[:, STAT_ACCEPTED].sum()),
                            rejected=int(stats[:, STAT_REJECTED].sum()), particles=n,
-                           uncoupled=uncoupled)
+                           largest_island=largest_island)
     return StepResult(state=new_state, exits=exits, failures=failures, stats=step_stats)
 
-
-#: Largest contact island integrated as one system. An island is integrated with a dense
-#: Jacobian (9 n unknowns, O(n^3) per step); larger islands are advanced without their
-#: contacts for the interval, and counted in :attr:`StepStats.uncoupled`.
-MAX_ISLAND_PIECES = 48
 
 #: The pair force is below this fraction of r_f beyond the contact reach (activation 1e-6).
 CONTACT_CUTOFF_ACTIVATION = 1.0e-6
@@ -363,7 +360,7 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
     """
     Advance with piece-piece contact: pieces alone as always, contact islands as one system.
 
-    Returns how many pieces were in islands too large to couple (see MAX_ISLAND_PIECES).
+    Returns the number of pieces in the largest island.
 
     The pairs are those within reach at the start of the interval, the reach widened by how
     far the pieces can move in it (their speed relative to the cone, and a fall from rest).
@@ -378,8 +375,7 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
              + 0.5 * params.model.g * dt * dt)
     pairs = contact_pairs(y[:, 0:3], reach)
     islands = islands_of(state.count, pairs)
-    uncoupled = sum(len(members) for members, _ in islands if len(members) > MAX_ISLAND_PIECES)
-    islands = [island for island in islands if len(island[0]) <= MAX_ISLAND_PIECES]
+    largest = max((len(members) for members, _ in islands), default=0)
     alone = np.ones(state.count, dtype=bool)
     for members, _ in islands:
         alone[members] = False
@@ -401,10 +397,12 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
             seg = profile.segments(t_start, t1)
             ys = np.ascontiguousarray(y[members])
             counters = np.zeros(stats.shape[1], dtype=np.int64)
+            pos, width = band_order(members.size, local)
             code, t_reached, h, first = advance_island(
-                ys, np.ascontiguousarray(state.products[members]), local, machine, seg[0],
-                seg[1], seg[2], params.model.r, h, solver.rtol, params.atol, solver.h_min,
-                solver.h_max, solver.h_init, solver.max_steps, pull_off, counters)
+                ys, np.ascontiguousarray(state.products[members]), local, pos, 3 * width + 2,
+                machine, seg[0], seg[1], seg[2], params.model.r, h, solver.rtol, params.atol,
+                solver.h_min, solver.h_max, solver.h_init, solver.max_steps, pull_off,
+                counters)
             y[members] = ys
             # every member took the island's steps (its cost is per piece as well)
             stats[members, STAT_ACCEPTED] += counters[STAT_ACCEPTED]
@@ -425,7 +423,7 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
             t_event[members] = t_reached
             stats[members, STAT_REASON] = counters[STAT_REASON]
             break
-    return uncoupled
+    return largest
 
 
 def _failure(state: SimState, profile: RotationProfile, y: np.ndarray, i: int, t: float,

@@ -149,7 +149,7 @@ from ..formats.runlog import (
 from ..formats.topics import MessageRecord, QosProfile, TOPICS
 from ..physics.integrator import set_threads
 from ..physics.params import ModelParams
-from ..physics.simulation import MAX_ISLAND_PIECES, position_problems
+from ..physics.simulation import position_problems
 
 __all__ = ['SimNode', 'TopicInfo', 'main']
 
@@ -203,7 +203,7 @@ class _Window:
         self.given_up = 0.0
         self.accepted = 0
         self.rejected = 0
-        self.uncoupled = 0
+        self.largest_island = 0
 
 
 class SimNode(GuardedNode):
@@ -848,7 +848,7 @@ class SimNode(GuardedNode):
             self._timing[2] += done - stepped
             window.accepted += result.stats.accepted
             window.rejected += result.stats.rejected
-            window.uncoupled = max(window.uncoupled, result.stats.uncoupled)
+            window.largest_island = max(window.largest_island, result.stats.largest_island)
             self._last_tick = result
             self._total_exits += len(result.exits)
             self._total_failures += len(result.failures)
@@ -924,10 +924,6 @@ class SimNode(GuardedNode):
                        f'{self._pacer.catch_up:g} s given up: simulation time runs slower')
         else:
             message = f'real-time factor {achieved:.2f} (target {rtf:g})'
-        if window.uncoupled and not self._paused:
-            level = 1
-            message += (f'; {window.uncoupled} pieces in contact islands of more than '
-                        f'{MAX_ISLAND_PIECES} pieces moved without their contacts')
         res = self._last_tick
         values = {
             'simulation time (s)': f'{self._engine.t:.6f}',
@@ -946,7 +942,7 @@ class SimNode(GuardedNode):
             'pieces': str(self._engine.piece_count),
             'accepted steps': str(window.accepted),
             'rejected steps': str(window.rejected),
-            'pieces without contacts (island too large)': str(window.uncoupled),
+            'largest contact island (pieces)': str(window.largest_island),
             'exits (total)': str(self._total_exits),
             'failures (total)': str(self._total_failures),
             'mass in (kg)': f'{res.mass_in:.6f}' if res is not None else '0',

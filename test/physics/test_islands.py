@@ -208,17 +208,69 @@ def test_a_pile_settles() -> None:
     assert energy[-1] < 1e-3 * max(energy) and energy[-1] < energy[-10] < energy[-20]
 
 
-def test_an_island_too_large_is_counted_and_advanced_without_contacts() -> None:
-    from cone_feeder_sim.physics.simulation import MAX_ISLAND_PIECES
+def crowd_ring(m: ModelParams, count: int, spacing: float) -> np.ndarray:
+    """Return count pieces resting in touching rows on the cone's ring, (count, 3) m."""
+    xy = []
+    radius = 0.04
+    while len(xy) < count:
+        assert radius < 0.2
+        slots = int(2.0 * np.pi * radius / spacing)
+        for k in range(min(slots, count - len(xy))):
+            angle = 2.0 * np.pi * k / slots + 0.3 * radius
+            xy.append((radius * np.cos(angle), radius * np.sin(angle)))
+        radius += 0.9 * spacing
+    return resting(m, xy)
+
+
+def test_a_large_island_is_coupled_as_one() -> None:
+    # 50 touching pieces in rows around the tip: one island, in the band order
     m = model()
-    count = MAX_ISLAND_PIECES + 2
-    rng = np.random.default_rng(4)
-    positions = resting(m, rng.uniform(-0.03, 0.03, (count, 2))) + [0.0, 0.0, 0.01]
-    sim = Simulator(SimParams(model=m), RotationProfile.from_table(STILL))
+    positions = crowd_ring(m, 50, 0.047)
+    sim = Simulator(SimParams(model=m), RotationProfile.from_table(TURNING))
     sim.add(positions, np.zeros_like(positions))
-    result = sim.advance_to(0.02)
-    assert result.stats.uncoupled == count
-    alone = Simulator(SimParams(model=model(enabled=False)), RotationProfile.from_table(STILL))
+    largest = 0
+    for k in range(1, 11):
+        result = sim.advance_to(0.02 * k)
+        assert not result.failures
+        largest = max(largest, result.stats.largest_island)
+        q, _, _ = sim.world()
+        dist = np.linalg.norm(q[:, None] - q[None], axis=2) + np.eye(q.shape[0])
+        assert dist.min() > 2.0 * m.product.s_c
+    assert largest == 50
+    # without contact the same crowd overlaps: the check above can fail
+    alone = Simulator(SimParams(model=model(enabled=False)), RotationProfile.from_table(TURNING))
     alone.add(positions, np.zeros_like(positions))
-    alone.advance_to(0.02)
-    np.testing.assert_array_equal(sim.state.y, alone.state.y)
+    alone.advance_to(0.2)
+    assert not np.array_equal(alone.state.y, sim.state.y)
+
+
+def test_the_band_order_solves_what_the_given_order_solves() -> None:
+    # one island advanced with the reverse Cuthill-McKee band and with the full matrix
+    from cone_feeder_sim.physics.band import band_order
+    from cone_feeder_sim.physics.integrator import STAT_WIDTH
+    from cone_feeder_sim.physics.islands import advance_island
+    from cone_feeder_sim.physics.neighbours import contact_pairs
+    m = model()
+    params = SimParams(model=m)
+    positions = crowd_ring(m, 30, 0.047)
+    pairs = contact_pairs(positions, contact_reach(np.tile(product_row(m.product), (30, 1))))
+    [(members, local)] = islands_of(30, pairs)
+    assert members.size == 30
+    pos, width = band_order(30, local)
+    assert width < 12  # a ring of touching pieces is narrow in that order
+    y0 = np.zeros((30, 9))
+    y0[:, 0:3] = positions
+    products = np.tile(product_row(m.product), (30, 1))
+    seg_t, seg_omega, seg_domega = RotationProfile.from_table(TURNING).segments(0.0, 0.05)
+    solver = params.solver
+    out = []
+    for order, kl in [(pos, 3 * width + 2), (np.arange(30), 89)]:
+        y = y0.copy()
+        stats = np.zeros(STAT_WIDTH, dtype=np.int64)
+        code, t, _, _ = advance_island(
+            y, products, local, order, kl, params.global_row, seg_t, seg_omega, seg_domega,
+            m.r, 1e-4, solver.rtol, params.atol, solver.h_min, solver.h_max, solver.h_init,
+            solver.max_steps, m.interactions.pull_off, stats)
+        assert t == pytest.approx(0.05) and stats[0] > 5
+        out.append(y)
+    np.testing.assert_allclose(out[0][:, 0:3], out[1][:, 0:3], rtol=0.0, atol=1e-9)

@@ -41,6 +41,19 @@ def test_tip_rim_and_far_above() -> None:
     assert {(0, 1), (0, 2), (3, 4), (6, 7)} <= {tuple(p) for p in pairs}
 
 
+@pytest.mark.parametrize('fast', [1, 30, 300])
+def test_fast_pieces_with_a_long_reach_find_all_their_pairs(fast: int) -> None:
+    # the reach is widened by the distance a piece can move: a few (or many) fast pieces
+    # reach much further than the crowd; pairs fast-slow and fast-fast must all be found
+    rng = np.random.default_rng(fast)
+    x = rng.uniform(-0.2, 0.2, (600, 3))
+    reach = np.full(600, 0.025)
+    reach[rng.choice(600, fast, replace=False)] = rng.uniform(0.05, 0.3, fast)
+    pairs = contact_pairs(x, reach)
+    np.testing.assert_array_equal(pairs, contact_pairs_brute(x, reach))
+    assert len(pairs) > 600
+
+
 def test_a_dense_pile_grows_the_buffer() -> None:
     rng = np.random.default_rng(9)
     x = rng.uniform(-0.01, 0.01, (200, 3))  # every pair touches: 19,900 pairs
