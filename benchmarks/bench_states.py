@@ -31,7 +31,8 @@ pieces) and the median and longest tick. The states:
 Pieces start at seeded random places with rho in [0.03, 0.15] m. With ``--interactions``
 every row is measured twice, side by side: pieces alone (the paper's model) and pieces that
 touch (contact islands), both from places where no two pieces overlap (a lattice, in
-layers when one is not enough), with the cost ratio and the largest island. The calibration workload is printed first. Example::
+layers when one is not enough), with the cost ratio and the largest island. The
+calibration workload is printed first. Example::
 
     .venv/bin/python benchmarks/bench_states.py --pieces 20 150 2000 5000
     .venv/bin/python benchmarks/bench_states.py --pieces 150 1000 --interactions

@@ -321,9 +321,9 @@ def advance_island(y, products, pairs, pos, kl, machine, seg_t, seg_omega, seg_d
     y (n, 9) cone-axes states, updated in place; products (n, PRODUCT_WIDTH); pairs (m, 2)
     int64 local indices; pos (n,) int64 and kl the band order of the velocity system:
     piece p's unknowns are rows 3 pos[p] ... + 2, with at most kl (>= 2) sub-diagonals
-    (:func:`band.band_order`: kl = 3 width + 2); atol (9,); stats (STAT_WIDTH,) int64 counters of the island. The
-    step control is that of :func:`integrator.advance_particle`. Returns (status, t,
-    h_prop, piece): ACTIVE with the end time; EXITED with the exit time of ``piece`` (y then
+    (:func:`band.band_order`: kl = 3 width + 2); atol (9,); stats (STAT_WIDTH,) int64
+    counters of the island. The step control is that of :func:`integrator.advance_particle`.
+    Returns (status, t, h_prop, piece): ACTIVE with the end time; EXITED with the exit time of ``piece`` (y then
     holds every piece's state at that time); FAILED with the time reached.
     """
     n = y.shape[0]
