@@ -323,8 +323,9 @@ def advance_island(y, products, pairs, pos, kl, machine, seg_t, seg_omega, seg_d
     piece p's unknowns are rows 3 pos[p] ... + 2, with at most kl (>= 2) sub-diagonals
     (:func:`band.band_order`: kl = 3 width + 2); atol (9,); stats (STAT_WIDTH,) int64
     counters of the island. The step control is that of :func:`integrator.advance_particle`.
-    Returns (status, t, h_prop, piece): ACTIVE with the end time; EXITED with the exit time of ``piece`` (y then
-    holds every piece's state at that time); FAILED with the time reached.
+    Returns (status, t, h_prop, piece): ACTIVE with the end time; EXITED with the exit
+    time of ``piece`` (y then holds every piece's state at that time); FAILED with the time
+    reached.
     """
     n = y.shape[0]
     size = STATE_SIZE * n
