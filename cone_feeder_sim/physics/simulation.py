@@ -30,10 +30,10 @@ import math
 
 import numpy as np
 
+from .band import band_order
 from .integrator import (
     ACTIVE, advance_batch, EXITED, FAILED, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW,
     REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED, STAT_WIDTH)
-from .band import band_order
 from .islands import advance_island, islands_of
 from .model import STATE_SIZE
 from .neighbours import contact_pairs
@@ -313,8 +313,8 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     interactions = params.model.interactions
     largest_island = 0
     if interactions.enabled and n > 1:
-        largest_island = _advance_with_contacts(state, params, profile, t1, y, step_size, status,
-                                           t_event, stats)
+        largest_island = _advance_with_contacts(state, params, profile, t1, y, step_size,
+                                                status, t_event, stats)
     elif n:
         advance_batch(y, state.products, params.global_row, seg_t, seg_omega, seg_domega,
                       params.model.r, step_size, status, t_event, solver.rtol, params.atol,
