@@ -118,6 +118,37 @@ def test_a_collision_in_free_flight_keeps_momentum_and_follows_the_reference(v: 
     assert 0.0 < (qdot[1, 0] - qdot[0, 0]) / v < 0.3
 
 
+@pytest.mark.parametrize('v', [0.1, 1.0, 3.0])
+def test_restitution_and_contact_duration_are_those_the_parameters_predict(v: float) -> None:
+    # two default pieces head on, well above the cone, against the law's 1-D prediction
+    from cone_feeder_sim.physics.contact import COLLISION_FORCE_FRACTION, head_on_collision
+    m = model(0.05)
+    piece = m.product
+    gap = 0.08
+    t_out = np.arange(1, int((gap - 2 * piece.s0) / v * 1e3) + 301) * 1e-3
+    predicted = head_on_collision(piece.m, piece.s0, piece.s_c, piece.r_a, piece.r_d,
+                                  piece.r_f, 0.05, v, t_max=float(t_out[-1]), start=gap,
+                                  times=t_out)
+    positions = np.array([[-0.5 * gap, 0.0, 20.0], [0.5 * gap, 0.0, 20.0]])
+    velocities = np.array([[0.5 * v, 0.0, 0.0], [-0.5 * v, 0.0, 0.0]])
+    sim = Simulator(SimParams(model=m), RotationProfile.from_table(STILL))
+    sim.add(positions, velocities)
+    from cone_feeder_sim.physics.contact import pair_force_py
+    row = product_row(piece)
+    distance, strong = [], []
+    for t in t_out:
+        sim.advance_to(float(t))
+        q, qdot, _ = sim.world()
+        assert abs(qdot[:, 0].sum()) < 1e-14 and abs(qdot[:, 1].sum()) < 1e-14  # momentum
+        distance.append(q[1, 0] - q[0, 0])
+        force = pair_force_py(q[1], qdot[1], row, q[0], qdot[0], row, 0.0)[0]
+        strong.append(force > COLLISION_FORCE_FRACTION * piece.r_f)
+    np.testing.assert_allclose(distance, predicted.distance, rtol=0.0, atol=5e-6)
+    assert min(distance) == pytest.approx(predicted.closest, abs=1e-5)
+    assert sum(strong) * 1e-3 == pytest.approx(predicted.duration, abs=2.1e-3)
+    assert 0.0 < predicted.restitution < 0.1  # raw meat barely bounces
+
+
 @pytest.fixture(scope='module')
 def crowd_at_the_rim() -> tuple[np.ndarray, dict, dict]:
     """Six touching pieces near the rim, the cone spun up to -8 rad/s; both solutions."""
