@@ -86,10 +86,15 @@ def places(count: int, lift: float, packed: bool = False) -> np.ndarray:
     return np.column_stack([x, y, z])
 
 
-def engine_for(state: str, count: int, contacts: bool,
-               packed: bool) -> tuple[FeederEngine, int, int]:
+#: Largest island coupled whole in the benchmark (--max-island): every island, by default.
+EXACT = 10 ** 6
+
+
+def engine_for(state: str, count: int, contacts: bool, packed: bool,
+               max_island: int = EXACT) -> tuple[FeederEngine, int, int]:
     """Return the engine in ``state`` with ``count`` pieces, warm-up and measured ticks."""
-    model = ModelParams(interactions=InteractionParams(enabled=contacts))
+    model = ModelParams(interactions=InteractionParams(enabled=contacts,
+                                                       max_island=max_island))
     if state == 'reversing':
         feed = FeedParams(rate=max(500.0, count), max_pieces=count)
         engine = FeederEngine(EngineConfig(model=model, drive=DriveParams(pattern=PATTERN),
@@ -106,13 +111,13 @@ def engine_for(state: str, count: int, contacts: bool,
     return engine, 50, 50  # 1 s to settle (and spin up), 1 s measured
 
 
-def measure(state: str, count: int, contacts: bool = False,
-            packed: bool = False) -> dict[str, float]:
+def measure(state: str, count: int, contacts: bool = False, packed: bool = False,
+            max_island: int = EXACT) -> dict[str, float]:
     """Run one state with ``count`` pieces; return the figures."""
-    engine, warm, ticks = engine_for(state, count, contacts, packed)
+    engine, warm, ticks = engine_for(state, count, contacts, packed, max_island)
     for _ in range(warm):
         engine.tick()
-    durations, piece_seconds, steps, island = [], 0.0, 0, 0
+    durations, piece_seconds, steps, island, cut = [], 0.0, 0, 0, 0
     cpu0 = time.process_time()
     wall0 = time.perf_counter()
     for _ in range(ticks):
@@ -123,12 +128,13 @@ def measure(state: str, count: int, contacts: bool = False,
                                       + len(result.failures))
         steps += result.stats.accepted + result.stats.rejected
         island = max(island, result.stats.largest_island)
+        cut = max(cut, result.stats.pairs_left_out)
     wall = time.perf_counter() - wall0
     cpu = time.process_time() - cpu0
     return {'pieces': engine.piece_count, 'per_cpu': piece_seconds / cpu,
             'steps': steps / max(piece_seconds, 1e-12), 'capacity': ticks * engine.dt / wall,
             'median_ms': 1e3 * statistics.median(durations), 'max_ms': 1e3 * max(durations),
-            'island': island}
+            'island': island, 'cut': cut}
 
 
 def main() -> None:
@@ -138,6 +144,9 @@ def main() -> None:
     parser.add_argument('--states', nargs='+', choices=STATES, default=list(STATES))
     parser.add_argument('--interactions', action='store_true',
                         help='measure each row without and with contact between pieces')
+    parser.add_argument('--max-island', type=int, default=EXACT,
+                        help='with --interactions: cut islands larger than this (default: '
+                             'none is cut, exact coupling)')
     args = parser.parse_args()
     print(calibration_line())
     if args.interactions:
@@ -158,17 +167,18 @@ def main() -> None:
 def compare(args: argparse.Namespace) -> None:
     """Print each state and count without and with contacts, side by side."""
     print('# pc-s/CPU-s without and with contact between pieces; cost ratio = with / '
-          'without per particle-second; island = most pieces in one contact island')
+          'without per particle-second; island = most pieces in one contact island; '
+          'cut = most pairs left out (islands cut at --max-island)')
     print(f'{"state":>10} {"N":>6} {"without":>9} {"with":>9} {"ratio":>6} {"capacity":>9} '
-          f'{"max ms":>8} {"island":>9}')
+          f'{"max ms":>8} {"island":>9} {"cut":>6}')
     for state in args.states:
         for count in args.pieces:
             alone = measure(state, count, False, packed=True)
-            touch = measure(state, count, True, packed=True)
+            touch = measure(state, count, True, packed=True, max_island=args.max_island)
             print(f'{state:>10} {int(touch["pieces"]):>6} {alone["per_cpu"]:>9.0f} '
                   f'{touch["per_cpu"]:>9.0f} {alone["per_cpu"] / touch["per_cpu"]:>6.2f} '
                   f'{touch["capacity"]:>9.2f} {touch["max_ms"]:>8.1f} '
-                  f'{int(touch["island"]):>9}', flush=True)
+                  f'{int(touch["island"]):>9} {int(touch["cut"]):>6}', flush=True)
 
 
 if __name__ == '__main__':

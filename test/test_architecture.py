@@ -26,9 +26,9 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / 'cone_feeder_sim'
-#: Rank of each room; ros and report are side by side.
-RANK = {'errors': 0, '__init__': 0, 'physics': 1, 'feeder': 2, 'formats': 3, 'ros': 4,
-        'report': 4, 'cli': 5}
+#: Rank of each room; physics and weigher, ros and report are side by side.
+RANK = {'errors': 0, '__init__': 0, 'physics': 1, 'weigher': 1, 'feeder': 2, 'formats': 3,
+        'ros': 4, 'report': 4, 'cli': 5}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs', 'geometry_msgs',
                 'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'builtin_interfaces'}  # ament_index_python: an optional look-up of files

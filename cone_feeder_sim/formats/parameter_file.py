@@ -28,9 +28,11 @@ import yaml
 
 from ..errors import ParameterError
 from ..physics.params import model_params_from_mapping, ModelParams
+from ..weigher.machine import weigher_params_from_mapping, WeigherParams
 
 PACKAGE = 'cone_feeder_sim'
 DEFAULT_PARAMETER_FILE = 'table2.yaml'
+DEFAULT_WEIGHER_FILE = 'weigher.yaml'
 
 
 def config_dir() -> Path:
@@ -85,3 +87,25 @@ def load_model_params(path: str | Path | None = None,
         return model_params_from_mapping(merged)
     except ParameterError as exc:
         raise ParameterError(f'{path}: {exc}') from exc
+
+
+def load_weigher_params(path: str | Path | None = None,
+                        overrides: Mapping[str, Any] | None = None) -> WeigherParams:
+    """
+    Load and validate a weigher file (default: config/weigher.yaml) with overrides.
+
+    Keys of ``overrides`` are the file's keys (a scenario's ``weigher:`` section); both are
+    validated together, and errors name the file and the key.
+    """
+    path = Path(path) if path is not None else config_dir() / DEFAULT_WEIGHER_FILE
+    content = read_yaml(path)
+    if not isinstance(content, Mapping):
+        raise ParameterError(f'{path} must hold a mapping of parameter: value')
+    try:
+        base = weigher_params_from_mapping(content)
+    except ParameterError as exc:
+        raise ParameterError(f'{path}: {exc}') from exc
+    try:
+        return weigher_params_from_mapping(overrides or {}, base)
+    except ParameterError as exc:
+        raise ParameterError(f'weigher: {exc}') from exc

@@ -145,6 +145,7 @@ SOLVER_LIMITS: dict[str, Limit] = {
 #: Ranges of the piece-piece contact settings (InteractionParams).
 INTERACTION_LIMITS: dict[str, Limit] = {
     'pull_off': Limit(0.0, 1.0e3, 'N'),
+    'max_island': Limit(2, 10 ** 6, 'pieces'),
 }
 
 NORMAL_FORCE_CHOICES = ('newton', 'literal')
@@ -295,11 +296,17 @@ class InteractionParams:
     paper's model); pull_off (N): amplitude of the adhesion between two pieces, the force
     that holds two just-touching pieces together. The default 0.05 N is an assumption (the
     paper gives no value): raw meat sticks to meat weakly, about 4 % of the weight of a
-    default 0.125-kg piece.
+    default 0.125-kg piece. max_island: the largest contact island integrated as one
+    system; a larger one is cut, in its band order, into parts of at most this many pieces,
+    and the pairs between parts are left out for that interval (counted in
+    ``StepStats.pairs_left_out``). The default 48 keeps a crowded live cone responsive; an
+    island's cost grows with its size (doc/model.md, "Large islands"); raise it for exact
+    coupling of any crowd.
     """
 
     enabled: bool = False
     pull_off: float = 0.05
+    max_island: int = 48
 
     def __post_init__(self) -> None:
         """Validate the fields."""
@@ -309,6 +316,8 @@ class InteractionParams:
         object.__setattr__(self, 'enabled', bool(self.enabled))
         object.__setattr__(self, 'pull_off', check_number(
             'interactions.pull_off', self.pull_off, INTERACTION_LIMITS['pull_off']))
+        object.__setattr__(self, 'max_island', check_integer(
+            'interactions.max_island', self.max_island, INTERACTION_LIMITS['max_island']))
 
 
 # Layout of the global (machine and model) array used by the kernel.
@@ -373,7 +382,7 @@ class ModelParams:
 
 
 #: Keys of the ``interactions`` mapping of parameter files and scenarios.
-INTERACTION_KEYS = ('enabled', 'pull_off')
+INTERACTION_KEYS = ('enabled', 'pull_off', 'max_island')
 
 
 def interaction_params_from_mapping(mapping: Any,

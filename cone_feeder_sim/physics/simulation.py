@@ -140,14 +140,17 @@ class StepStats:
     Solver statistics of one interval: accepted and rejected steps over all particles.
 
     largest_island: pieces in the largest contact island of the interval (0 without
-    contact). An island takes the steps its most demanding piece needs, so this is what
-    makes a crowded interval expensive.
+    contact), before any cut. An island takes the steps its most demanding piece needs, so
+    this is what makes a crowded interval expensive. pairs_left_out: pairs within reach
+    that were left out because their island was larger than
+    ``InteractionParams.max_island`` and was cut into parts.
     """
 
     accepted: int
     rejected: int
     particles: int
     largest_island: int = 0
+    pairs_left_out: int = 0
 
 
 @dataclass(frozen=True)
@@ -311,10 +314,10 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     stats = np.zeros((n, STAT_WIDTH), dtype=np.int64)
     solver = params.solver
     interactions = params.model.interactions
-    largest_island = 0
+    largest_island = left_out = 0
     if interactions.enabled and n > 1:
-        largest_island = _advance_with_contacts(state, params, profile, t1, y, step_size,
-                                                status, t_event, stats)
+        largest_island, left_out = _advance_with_contacts(state, params, profile, t1, y,
+                                                          step_size, status, t_event, stats)
     elif n:
         advance_batch(y, state.products, params.global_row, seg_t, seg_omega, seg_domega,
                       params.model.r, step_size, status, t_event, solver.rtol, params.atol,
@@ -330,7 +333,7 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
                         step_size=step_size[keep])
     step_stats = StepStats(accepted=int(stats[:, STAT_ACCEPTED].sum()),
                            rejected=int(stats[:, STAT_REJECTED].sum()), particles=n,
-                           largest_island=largest_island)
+                           largest_island=largest_island, pairs_left_out=left_out)
     return StepResult(state=new_state, exits=exits, failures=failures, stats=step_stats)
 
 
@@ -356,11 +359,12 @@ def contact_reach(products: np.ndarray) -> np.ndarray:
 def _advance_with_contacts(state: SimState, params: SimParams, profile: RotationProfile,
                            t1: float, y: np.ndarray, step_size: np.ndarray,
                            status: np.ndarray, t_event: np.ndarray,
-                           stats: np.ndarray) -> int:
+                           stats: np.ndarray) -> tuple[int, int]:
     """
     Advance with piece-piece contact: pieces alone as always, contact islands as one system.
 
-    Returns the number of pieces in the largest island.
+    Returns the number of pieces in the largest island and the pairs left out (islands
+    larger than ``max_island`` are cut by :func:`cut_island`).
 
     The pairs are those within reach at the start of the interval, the reach widened by how
     far the pieces can move in it (their speed relative to the cone, and a fall from rest).
@@ -376,6 +380,18 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
     pairs = contact_pairs(y[:, 0:3], reach)
     islands = islands_of(state.count, pairs)
     largest = max((len(members) for members, _ in islands), default=0)
+    limit = params.model.interactions.max_island
+    left_out = 0
+    if largest > limit:
+        kept = []
+        for members, local in islands:
+            if len(members) <= limit:
+                kept.append((members, local))
+                continue
+            parts, dropped = cut_island(members, local, limit)
+            kept += parts
+            left_out += dropped
+        islands = kept
     alone = np.ones(state.count, dtype=bool)
     for members, _ in islands:
         alone[members] = False
@@ -423,7 +439,32 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
             t_event[members] = t_reached
             stats[members, STAT_REASON] = counters[STAT_REASON]
             break
-    return largest
+    return largest, left_out
+
+
+def cut_island(members: np.ndarray, local: np.ndarray,
+               limit: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], int]:
+    """
+    Cut an island into parts of at most ``limit`` pieces; return them and the pairs cut.
+
+    members (n,) piece indices, local (m, 2) its pairs as indices into members. The parts
+    are runs of the island's band order (:func:`band.band_order`), so touching pieces
+    mostly stay together; each part is (members, local pairs) like an island, its members
+    sorted. A part of one piece has no pairs.
+    """
+    pos, _ = band_order(members.size, local)
+    order = np.argsort(pos)
+    part_of = np.empty(members.size, dtype=np.int64)
+    part_of[order] = np.arange(members.size) // limit
+    inside = part_of[local[:, 0]] == part_of[local[:, 1]]
+    parts = []
+    where = np.empty(members.size, dtype=np.int64)
+    for part in range(int(part_of.max()) + 1):
+        chosen = np.flatnonzero(part_of == part)
+        where[chosen] = np.arange(chosen.size)
+        own = local[inside & (part_of[local[:, 0]] == part)]
+        parts.append((members[chosen], where[own]))
+    return parts, int((~inside).sum())
 
 
 def _failure(state: SimState, profile: RotationProfile, y: np.ndarray, i: int, t: float,

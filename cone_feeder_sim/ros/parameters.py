@@ -352,6 +352,11 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
         ParamSpec('interactions.pull_off', model.interactions.pull_off, 'adhesion between two '
                   'just-touching pieces (N); default from the parameter file',
                   limit=INTERACTION_LIMITS['pull_off']),
+        ParamSpec('interactions.max_island', model.interactions.max_island, 'largest contact '
+                  'island integrated as one system (pieces); a larger one is cut into parts '
+                  'and the pairs between them are left out for the tick (WARN on '
+                  '/diagnostics); default from the parameter file',
+                  limit=INTERACTION_LIMITS['max_island']),
     ]
     specs += model_param_specs(model)
     return specs
@@ -390,7 +395,8 @@ def model_from_values(values: dict[str, Any], base: ModelParams) -> ModelParams:
 def engine_config_from_values(values: dict[str, Any], base: ModelParams) -> EngineConfig:
     """Build and validate the whole engine configuration from parameter values."""
     model = replace(model_from_values(values, base), interactions=InteractionParams(
-        enabled=values['interactions.enabled'], pull_off=values['interactions.pull_off']))
+        enabled=values['interactions.enabled'], pull_off=values['interactions.pull_off'],
+        max_island=values['interactions.max_island']))
     solver = SolverParams(**{name[len('solver.'):]: value for name, value in values.items()
                              if name.startswith('solver.')})
     flat = _array(values['initial_pieces.positions'])

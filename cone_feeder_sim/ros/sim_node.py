@@ -204,6 +204,7 @@ class _Window:
         self.accepted = 0
         self.rejected = 0
         self.largest_island = 0
+        self.pairs_left_out = 0
 
 
 class SimNode(GuardedNode):
@@ -849,6 +850,7 @@ class SimNode(GuardedNode):
             window.accepted += result.stats.accepted
             window.rejected += result.stats.rejected
             window.largest_island = max(window.largest_island, result.stats.largest_island)
+            window.pairs_left_out = max(window.pairs_left_out, result.stats.pairs_left_out)
             self._last_tick = result
             self._total_exits += len(result.exits)
             self._total_failures += len(result.failures)
@@ -924,6 +926,12 @@ class SimNode(GuardedNode):
                        f'{self._pacer.catch_up:g} s given up: simulation time runs slower')
         else:
             message = f'real-time factor {achieved:.2f} (target {rtf:g})'
+        if window.pairs_left_out and not self._paused:
+            level = 1
+            message += (f'; a contact island of {window.largest_island} pieces was cut into '
+                        f'parts of at most interactions.max_island = '
+                        f'{self._engine.config.model.interactions.max_island}: '
+                        f'{window.pairs_left_out} pairs left out')
         res = self._last_tick
         values = {
             'simulation time (s)': f'{self._engine.t:.6f}',
@@ -943,6 +951,7 @@ class SimNode(GuardedNode):
             'accepted steps': str(window.accepted),
             'rejected steps': str(window.rejected),
             'largest contact island (pieces)': str(window.largest_island),
+            'contact pairs left out (island cut)': str(window.pairs_left_out),
             'exits (total)': str(self._total_exits),
             'failures (total)': str(self._total_failures),
             'mass in (kg)': f'{res.mass_in:.6f}' if res is not None else '0',

@@ -31,8 +31,9 @@ TURNING = [[0.0, 0.0], [0.4, -8.0], [5.0, -8.0]]
 HEAVY = ProductParams(m=0.2, s0=0.03)  # another product: heavier and larger
 
 
-def model(pull_off: float = 0.05, enabled: bool = True) -> ModelParams:
-    return ModelParams(interactions=InteractionParams(enabled=enabled, pull_off=pull_off))
+def model(pull_off: float = 0.05, enabled: bool = True, max_island: int = 1000) -> ModelParams:
+    return ModelParams(interactions=InteractionParams(enabled=enabled, pull_off=pull_off,
+                                                      max_island=max_island))
 
 
 def simulate(m: ModelParams, table: list, positions: np.ndarray, velocities=None,
@@ -273,6 +274,37 @@ def test_a_large_island_is_coupled_as_one() -> None:
     alone.add(positions, np.zeros_like(positions))
     alone.advance_to(0.2)
     assert not np.array_equal(alone.state.y, sim.state.y)
+
+
+def test_an_island_larger_than_max_island_is_cut_and_the_cut_pairs_counted() -> None:
+    from cone_feeder_sim.physics.simulation import cut_island
+    m = model()
+    positions = crowd_ring(m, 50, 0.047)
+    pairs = contact_pairs_of(positions)
+    [(members, local)] = islands_of(50, pairs)
+    parts, dropped = cut_island(members, local, 20)
+    assert [len(p) for p, _ in parts] == [20, 20, 10]
+    assert sorted(np.concatenate([p for p, _ in parts]).tolist()) == list(range(50))
+    kept = {tuple(sorted((int(p[a]), int(p[b])))) for p, own in parts for a, b in own}
+    assert kept <= {tuple(pair) for pair in pairs.tolist()}
+    assert len(kept) + dropped == len(pairs) and 0 < dropped < len(pairs) // 2
+    # the simulation cuts, counts and keeps going; with a limit above the island, nothing
+    results = {}
+    for limit in (20, 50):
+        sim = Simulator(SimParams(model=model(max_island=limit)),
+                        RotationProfile.from_table(TURNING))
+        sim.add(positions, np.zeros_like(positions))
+        result = sim.advance_to(0.02)
+        assert not result.failures and result.stats.largest_island == 50
+        results[limit] = result.stats.pairs_left_out
+    assert results[50] == 0 and results[20] > 0
+
+
+def contact_pairs_of(positions: np.ndarray) -> np.ndarray:
+    from cone_feeder_sim.physics.neighbours import contact_pairs
+    count = positions.shape[0]
+    return contact_pairs(positions, contact_reach(np.tile(product_row(ProductParams()),
+                                                          (count, 1))))
 
 
 def test_the_band_order_solves_what_the_given_order_solves() -> None:
