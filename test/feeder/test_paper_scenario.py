@@ -18,7 +18,7 @@ Keep doc/paper_replication.md true: config/paper_table1.yaml and the studies aro
 Every number the page states is checked here. Run the file as a script to print the
 page's tables (the slip-onset study is printed only; it takes about a minute):
 
-    python test/test_paper_scenario.py
+    python test/feeder/test_paper_scenario.py
 """
 
 from collections.abc import Sequence
@@ -375,6 +375,88 @@ def test_sample_4_sticks_only_below_5_rad_s() -> None:
         assert set(run_variant(ramp(0.5, sign * 5.5), [4], 10.0)) == {4}
 
 
+#: Samples the paper says lay among other pieces; sample 4 lay alone.
+CROWDED = (1, 2, 3, 5)
+#: Seeded arrangements of neighbours in the study; neighbours per crowded sample.
+ARRANGEMENTS = 20
+NEIGHBOURS = 2
+
+
+def with_neighbours(seed: int | None, rotation: Any = None) -> dict[str, Any]:
+    """
+    Return the scenario with contact on and, for a seed, neighbours around samples 1-3, 5.
+
+    Each crowded sample gets NEIGHBOURS default pieces (d = 225 N*s/m) touching it: centres
+    50 mm away (2 s0) at seeded random bearings, at the sample's start height, inside the
+    cone and no closer than 50 mm to any other piece. The five samples keep ids 0-4.
+    """
+    content = variant(rotation)
+    content['interactions'] = {'enabled': True, 'max_island': 1000}
+    if seed is None:
+        return content
+    rng = np.random.default_rng(seed)
+    particles = list(content['particles'])
+    centres = [np.array(p['position'][:2]) for p in particles]
+    for sample in CROWDED:
+        x, y, z = particles[sample - 1]['position']
+        placed = 0
+        while placed < NEIGHBOURS:
+            bearing = rng.uniform(0.0, 2.0 * math.pi)
+            c = np.array([x + 0.05 * math.cos(bearing), y + 0.05 * math.sin(bearing)])
+            others = [o for o in centres if not np.allclose(o, (x, y))]
+            if np.hypot(*c) > 0.2 or min(np.hypot(*(c - o)) for o in others) < 0.05:
+                continue
+            particles.append({'position': [float(c[0]), float(c[1]), z], 'd': 225.0})
+            centres.append(c)
+            placed += 1
+    content['particles'] = particles
+    return content
+
+
+def sample_exits(content: dict[str, Any]) -> dict[int, Exit]:
+    """Run scenario content; return the exits of the five samples (ids 0-4) only."""
+    table = run_scenario(scenario_from_mapping(content, base_dir=CONFIG)).exit_table()
+    return {int(i) + 1: (float(t), float(a), int(c))
+            for i, t, a, c in zip(table['ids'], table['t'], table['angle_deg'],
+                                  table['channel']) if int(i) < 5}
+
+
+def neighbour_study() -> dict[int, list[Exit | None]]:
+    """Return every sample's exit in each arrangement of neighbours (None: stayed)."""
+    runs = [sample_exits(with_neighbours(seed)) for seed in range(ARRANGEMENTS)]
+    return {s: [run.get(s) for run in runs] for s in SAMPLES}
+
+
+#: Exits of the five samples with contact on and no neighbours (doc/paper_replication.md, 8).
+CONTACT_EXITS = {1: (4.361, 32.7, 3), 2: (0.967, 223.7, 10), 3: (1.058, 277.1, 8),
+                 4: (1.365, 359.5, 5), 5: (4.093, 245.0, 9)}
+#: Exits of the samples with neighbours arranged by seed 0.
+NEIGHBOURS_SEED_0 = {1: (0.960, 32.5, 3), 2: (1.012, 204.2, 11), 3: (1.060, 275.9, 8),
+                     4: (1.365, 359.3, 5), 5: (0.661, 195.6, 11)}
+
+
+def assert_exits(exits: dict[int, Exit], expected: dict[int, Exit]) -> None:
+    assert exits.keys() == expected.keys()
+    for s, (t, angle, channel) in expected.items():
+        assert exits[s][0] == pytest.approx(t, abs=1e-3)
+        assert exits[s][1] == pytest.approx(angle, abs=0.1)
+        assert exits[s][2] == channel
+
+
+def test_contact_between_the_samples_themselves() -> None:
+    # samples 2 and 4 start 58 mm apart and 1 and 5 meet on the way: with contact alone,
+    # sample 1 is held back and leaves with 5 under counter-clockwise rotation
+    exits = sample_exits(with_neighbours(None))
+    assert_exits(exits, CONTACT_EXITS)
+    paper = run_exits(variant())
+    assert exits[3] == pytest.approx(paper[3], abs=1e-3)  # the one that touches nobody
+    assert exits[1][0] > 4.0 > paper[1][0]
+
+
+def test_neighbours_move_the_exits_as_documented() -> None:
+    assert_exits(sample_exits(with_neighbours(0)), NEIGHBOURS_SEED_0)
+
+
 def main() -> None:
     """Print the tables of doc/paper_replication.md."""
     scenario = load_scenario(SCENARIO)
@@ -404,6 +486,17 @@ def main() -> None:
             f'{s}: {run[s][1]:.1f} ({run[s][2]}) {wrap(run[s][1] - TABLE_I[s][0]):+.1f}'
             for s in SAMPLES))
     print('pair history:', run_variant(PAIR_ROTATION, [1, 2], 5.0))
+    print(f'neighbours: {NEIGHBOURS} around samples {CROWDED}, {ARRANGEMENTS} arrangements')
+    print('  seed 0:', sample_exits(with_neighbours(0)))
+    for s, found in neighbour_study().items():
+        left = [e for e in found if e is not None]
+        errors = [wrap(e[1] - TABLE_I[s][0]) for e in left]
+        hits = sum(e[2] == TABLE_I[s][1] for e in left)
+        cw = sum(e[1] is not None and e[0] < 3.5 for e in left)
+        print(f'  sample {s}: left {len(left)}/{ARRANGEMENTS}, Table I channel {hits}, '
+              f'angles ' + ', '.join(f'{e[1]:.1f} ({e[2]})' for e in left)
+              + (f'; error {min(errors):+.1f} .. {max(errors):+.1f}' if errors else '')
+              + f'; before 3.5 s (cw) {cw}')
     print('on a stationary cone after 2 s: radius (m), gap (mm), N / (m g):')
     product = scenario.particles[0].product
     for reading in ('full', 'tangential'):
