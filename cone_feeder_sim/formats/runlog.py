@@ -57,7 +57,8 @@ from ..feeder.engine import (
     SpawnRequest)
 from ..feeder.scenario import Scenario
 from ..physics.params import (
-    CHANNEL_KEYS, MODEL_KEYS, ModelParams, P_M, PRODUCT_LIMITS, ProductParams, SolverParams)
+    CHANNEL_KEYS, INTERACTION_KEYS, MODEL_KEYS, ModelParams, P_M, PRODUCT_LIMITS,
+    ProductParams, SolverParams)
 from ..physics.simulation import Failure, Simulator, StepResult
 
 __all__ = [
@@ -73,6 +74,7 @@ __all__ = [
     'event_text',
     'expand_record_path',
     'input_event',
+    'interaction_values',
     'model_parameter_values',
     'parameter_text',
 ]
@@ -142,6 +144,12 @@ def model_parameter_values(model: ModelParams) -> dict[str, Any]:
         values[f'model.{key}'] = (int(value) if key == 'channel_count' else
                                   float(value) if key == 'channel_boundary' else value)
     return values
+
+
+def interaction_values(model: ModelParams) -> dict[str, Any]:
+    """Return the ``interactions.<key>`` values (contact between pieces), as the node's."""
+    return {f'interactions.{key}': getattr(model.interactions, key)
+            for key in INTERACTION_KEYS}
 
 
 def solver_parameter_values(solver: SolverParams) -> dict[str, Any]:
@@ -254,6 +262,7 @@ def scenario_metadata(scenario: Scenario, source: str, topics: Mapping[str, str]
     """Return the ``cone_feeder_sim`` metadata of a headless run."""
     values: dict[str, Any] = dict(model_parameter_values(scenario.model))
     values.update(solver_parameter_values(scenario.solver))
+    values.update(interaction_values(scenario.model))
     values.update({'frame_id': frame_id, 'markers.rate': markers_rate,
                    'duration': scenario.duration, 'output_interval': scenario.output_interval})
     data = {name: parameter_text(value) for name, value in values.items()}

@@ -27,10 +27,11 @@ import pathlib
 from typing import Any
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.collections import LineCollection
+from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Wedge
 import numpy as np
+from scipy.spatial.distance import pdist
 
 from .read import (
     check_channel_mass, DEFAULT_MAX_TRAJECTORIES, DEFAULT_MAX_TRAJECTORY_POINTS, read_run, RunData)
@@ -102,6 +103,17 @@ def draw_top_view(ax: Any, run: RunData) -> None:
         handles.append(ax.scatter(starts[:, 0], starts[:, 1], s=14, facecolor='white',
                                   edgecolor='black', linewidth=0.7, zorder=4,
                                   label='first position'))
+    if run.last_frame is not None and len(run.last_frame[1]):
+        t_last, xy = run.last_frame
+        s0 = run.piece_radius()
+        ax.add_collection(PatchCollection(
+            [Circle((float(x), float(y)), s0) for x, y in xy], facecolor='tab:orange',
+            edgecolor='saddlebrown', alpha=0.35, linewidth=0.6, zorder=5))
+        touching = int((pdist(xy) < 2.0 * s0).sum()) if len(xy) > 1 else 0
+        handles.append(ax.scatter([], [], s=40, facecolor='tab:orange', alpha=0.35,
+                                  edgecolor='saddlebrown',
+                                  label=f'{len(xy)} pieces at {t_last:.2f} s to scale '
+                                        f'(s0 {1e3 * s0:.0f} mm; {touching} pairs < 2 s0)'))
     if len(exits):
         many = len(exits) > _MANY_EXITS
         ax.scatter(exits.position[:, 0], exits.position[:, 1], s=10 if many else 28,
@@ -125,7 +137,7 @@ def draw_top_view(ax: Any, run: RunData) -> None:
         _no_data(ax, 'no particle_states or exit_events')
     if handles:
         ax.legend(handles=handles, loc='upper center', bbox_to_anchor=(0.5, -0.07),
-                  ncol=min(4, len(handles)), fontsize=8.5, frameon=False)
+                  ncol=2 if len(handles) > 2 else len(handles), fontsize=8.5, frameon=False)
 
 
 def draw_exits(ax: Any, run: RunData) -> None:
@@ -218,6 +230,9 @@ def _summary_line(run: RunData) -> str:
     for key in ('source', 'version', 'seed', 'feed.seed'):
         if run.metadata.get(key):
             parts.append(f'{key} {run.metadata[key]}')
+    contact = run.contact()
+    if contact is not None:
+        parts.append(f'contact between pieces {contact}')
     return ' | '.join(parts)
 
 

@@ -151,6 +151,8 @@ class RunData:
 
     ``layout`` and ``cone_radius`` (m) come from the metadata when
     ``layout_from_metadata`` is true, else from :class:`ModelParams` defaults.
+    ``last_frame`` is the time (s) and the (n, 2) positions (m) of the last
+    ``particle_states`` message, or None.
     ``omega`` is the cone's angular velocity (rad/s) per ``cone_state``
     message; ``pieces`` the number of points per ``particle_states`` message;
     ``channel_mass`` the data of the last ``channel_mass`` message (kg, index 0
@@ -175,6 +177,26 @@ class RunData:
     message_count: int
     truncated: str | None
     notes: tuple[str, ...]
+    last_frame: tuple[float, np.ndarray] | None = None
+
+    def piece_radius(self) -> float:
+        """Return the pieces' outer radius s0 (m): the metadata's, else the default."""
+        try:
+            value = float(_metadata_value(self.metadata['model.s0']))
+        except (KeyError, TypeError, ValueError):
+            return ModelParams().product.s0
+        return value if value > 0.0 else ModelParams().product.s0
+
+    def contact(self) -> str | None:
+        """Return the contact setting recorded ('on, pull-off ...' or 'off'), or None."""
+        enabled = self.metadata.get('interactions.enabled')
+        if enabled is None:
+            return None
+        if str(enabled).lower() not in ('true', '1'):
+            return 'off'
+        pull = self.metadata.get('interactions.pull_off', '?')
+        island = self.metadata.get('interactions.max_island', '?')
+        return f'on (pull-off {pull} N, max island {island})'
 
     def exit_totals(self) -> ChannelTotals:
         """Return exits per channel over the layout's channels (more if exits name more)."""
@@ -361,6 +383,7 @@ class _RunReader:
         self.trajectories = _TrajectoryCollector(max_trajectories, max_trajectory_points)
         self.pieces_t: list[float] = []
         self.pieces_n: list[int] = []
+        self.last_frame: tuple[float, np.ndarray] | None = None
         self.omega_t: list[float] = []
         self.omega: list[float] = []
         self.exit_parts: list[tuple[float, np.ndarray]] = []
@@ -424,6 +447,7 @@ class _RunReader:
         _require(points, ('x', 'y', 'id'), 'particle_states')
         self.pieces_t.append(t)
         self.pieces_n.append(int(points.shape[0]))
+        self.last_frame = (t, np.column_stack([points['x'], points['y']]).astype(np.float64))
         self.trajectories.add(t, points['id'], points['x'], points['y'])
 
     def _exit_events(self, t: float, message: dict[str, Any]) -> None:
@@ -564,7 +588,7 @@ def _finish(path: pathlib.Path, reader: _RunReader, truncated: str | None) -> Ru
         pieces=_series(reader.pieces_t, reader.pieces_n, np.int64),
         channel_mass=reader.channel_mass, channel_mass_time=reader.channel_mass_time,
         topics=dict(reader.topics), message_count=reader.message_count, truncated=truncated,
-        notes=tuple(notes))
+        notes=tuple(notes), last_frame=reader.last_frame)
 
 
 def exits_per_channel(exits: ExitEvents, channel_count: int) -> ChannelTotals:

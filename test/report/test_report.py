@@ -244,6 +244,27 @@ def test_read_run_gives_what_was_written(sample: tuple[SampleRun, Path]) -> None
     np.testing.assert_array_equal(data.channel_mass, mass)
     assert data.channel_mass_time == pytest.approx(run.times_ns[-1] * 1e-9)
     assert check_channel_mass(data, totals) == (True, 0.0)
+    # the last frame: the pieces of the last message, as written
+    t_last, xy = data.last_frame
+    assert t_last == pytest.approx(times[-1])
+    k = run.ticks - 1
+    np.testing.assert_array_equal(
+        xy, np.array([run.position(i, k) for i in run.on_cone(k)], dtype=np.float32))
+
+
+def test_contact_setting_and_piece_size_come_from_the_metadata(
+        sample: tuple[SampleRun, Path]) -> None:
+    from cone_feeder_sim.report.read import RunData
+    base = read_run(sample[1])
+    assert base.contact() is None and base.piece_radius() == 0.025  # not recorded: default
+    on = dataclasses.replace(base, metadata={'interactions.enabled': 'true',
+                                             'interactions.pull_off': '0.05',
+                                             'interactions.max_island': '48',
+                                             'model.s0': '0.03'})
+    assert on.contact() == 'on (pull-off 0.05 N, max island 48)'
+    assert on.piece_radius() == 0.03
+    off = dataclasses.replace(base, metadata={'interactions.enabled': 'false'})
+    assert off.contact() == 'off' and isinstance(off, RunData)
 
 
 def test_write_report_writes_a_png(sample: tuple[SampleRun, Path], tmp_path: Path) -> None:
