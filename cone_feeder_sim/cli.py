@@ -45,6 +45,7 @@ from .feeder.runner import run_scenario
 from .feeder.scenario import Scenario
 from .formats.events_csv import EventsCsvWriter
 from .formats.mcap_reader import recover_mcap
+from .formats.packs_csv import write_packs_csv
 from .formats.runlog import ScenarioRecorder
 from .formats.scenario_file import load_scenario
 from .physics.simulation import Simulator, StepResult, warm_up
@@ -162,6 +163,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument('scenario', help='scenario YAML file')
     run.add_argument('--events', required=True, help='CSV file for the exit events')
     run.add_argument('--quiet', action='store_true', help='no progress bar')
+    run.add_argument('--packs', metavar='PACKS.csv',
+                     help="CSV file for the weigher's packs (the scenario needs a weigher: "
+                          'section; weigher: {} is the default machine)')
     run.add_argument('--mcap', metavar='OUT.mcap',
                      help='also record the run to an MCAP file (the topics of sim_node)')
     report = sub.add_parser(
@@ -189,6 +193,11 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
     """Run a scenario, writing exits as they happen; return the exit code."""
     scenario: Scenario = load_scenario(args.scenario)
     check_writable(args.events)
+    if args.packs is not None:
+        if scenario.weigher is None:
+            raise ConeFeederError(f'--packs needs a weigher: section in {args.scenario} '
+                                  '(weigher: {} is the default machine)')
+        check_writable(args.packs, 'the packs')
     bar = None if args.quiet else ProgressBar(scenario.duration, err)
     with StopOnSignals() as stop, contextlib.ExitStack() as outputs:
         recorder = outputs.enter_context(contextlib.closing(
@@ -206,6 +215,7 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
         finally:
             if bar is not None:
                 bar.end()
+    packed = write_packs_csv(args.packs, result.packs) if args.packs is not None else 0
     for failure in result.failures:
         err.write(f'warning: particle {failure.particle_id} removed at t={failure.t:.6f} s: '
                   f'{failure.reason}\n')
@@ -220,6 +230,14 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
               f'events written to {args.events}\n')
     if recorder is not None:
         err.write(f'run recorded to {args.mcap}\n')
+    if result.weigher is not None:
+        stats = result.weigher.stats()
+        err.write(f'weigher: {stats.packs} packs ({stats.packs_per_minute:.1f} per minute), '
+                  f'giveaway {1e3 * stats.giveaway_mean:.1f} +- {1e3 * stats.giveaway_std:.1f} '
+                  f'g, {100 * stats.under_target:.1f} % under target, '
+                  f'{stats.starved_per_cycle:.2f} starved heads per cycle\n')
+    if args.packs is not None:
+        err.write(f'{packed} packs written to {args.packs}\n')
     return 0
 
 

@@ -65,6 +65,35 @@ def test_run_writes_one_row_per_exit(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert '100.0%' in err  # the progress bar reached the end
 
 
+def test_packs_csv_of_a_scenario_with_a_weigher(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture) -> None:
+    from cone_feeder_sim.formats.packs_csv import PACK_COLUMNS
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text(SCENARIO.replace('duration: 3.0', 'duration: 8.0') + (
+        'weigher: {target: 0.1, transport_time: 1.0, load_cell_noise: 0.0}\n'))
+    events, packs = tmp_path / 'events.csv', tmp_path / 'packs.csv'
+    assert main(['run', str(scenario), '--events', str(events), '--packs', str(packs)]) == 0
+    with events.open() as stream:
+        exits = list(csv.DictReader(stream))
+    with packs.open() as stream:
+        rows = list(csv.DictReader(stream))
+    assert tuple(rows[0].keys()) == PACK_COLUMNS
+    # the two pieces that left (0.125 kg each, target 0.1 kg) make two one-head packs,
+    # each from the channel its piece fell into, after transport, gate and settling
+    assert [int(r['pack']) for r in rows] == [1, 2]
+    assert sorted(r['heads'] for r in rows) == sorted(e['channel'] for e in exits)
+    for row in rows:
+        assert float(row['mass']) == 0.125 == float(row['measured'])
+        assert float(row['giveaway']) == pytest.approx(0.025)
+        exit_t = min(float(e['t']) for e in exits if e['channel'] == row['heads'])
+        assert float(row['t']) >= exit_t + 1.0 + 0.3 + 0.4  # transport, gate, settle
+    assert '2 packs written' in capsys.readouterr().err
+    # without a weigher: section, --packs is refused before anything runs
+    scenario.write_text(SCENARIO)
+    assert main(['run', str(scenario), '--events', str(events), '--packs', str(packs)]) == 2
+    assert 'weigher: section' in capsys.readouterr().err
+
+
 def test_bad_scenario_fails_before_running(
         tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     scenario = tmp_path / 'scenario.yaml'

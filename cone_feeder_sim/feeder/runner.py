@@ -29,6 +29,7 @@ import numpy as np
 
 from .scenario import Scenario
 from ..physics.simulation import ExitEvents, Failure, SimParams, Simulator, StepResult
+from ..weigher.machine import Pack, Weigher
 
 
 @dataclass
@@ -37,7 +38,9 @@ class RunResult:
     Everything a run produced: exits (one row per piece that left), failures, stats.
 
     end_time (s) is the simulation time the run reached; stopped is True when the stop
-    predicate ended it before the scenario's end.
+    predicate ended it before the scenario's end. With a weigher in the scenario, packs
+    are the packs it made (it runs to the scenario's duration, also after the last piece
+    left the cone) and weigher is the machine at the end (its balance and statistics).
     """
 
     exits: list[ExitEvents] = field(default_factory=list)
@@ -47,6 +50,8 @@ class RunResult:
     remaining_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     end_time: float = 0.0
     stopped: bool = False
+    packs: list[Pack] = field(default_factory=list)
+    weigher: Weigher | None = None
 
     def exit_table(self) -> dict[str, np.ndarray]:
         """Return all exits as columns (ids, t, angle_deg, channel, position, velocity, mass)."""
@@ -79,6 +84,7 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
         sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
                 [spec.product])
     result = RunResult()
+    weigher = Weigher(scenario.weigher) if scenario.weigher is not None else None
     k = 0
     while sim.t < scenario.duration and sim.state.count:
         if stop is not None and stop():
@@ -91,9 +97,16 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
         result.rejected_steps += step.stats.rejected
         if len(step.exits):
             result.exits.append(step.exits)
+        if weigher is not None:
+            weigher.receive(step.exits.channel, step.exits.mass, step.exits.t)
+            result.packs.extend(weigher.advance(t1))
         result.failures.extend(step.failures)
         if progress is not None:
             progress(t1, sim, step)
     result.remaining_ids = sim.state.ids.copy()
     result.end_time = sim.t
+    if weigher is not None and not result.stopped:  # the machine runs to the end
+        result.packs.extend(weigher.advance(scenario.duration))
+    if weigher is not None:
+        result.weigher = weigher
     return result

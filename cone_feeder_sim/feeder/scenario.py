@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 from ..physics.params import ModelParams, ProductParams, SolverParams
 from ..physics.rotation import RotationProfile
+from ..weigher.machine import WeigherParams
 
 
 @dataclass(frozen=True)
@@ -32,7 +33,7 @@ class ParticleSpec:
 
 @dataclass(frozen=True)
 class Scenario:
-    """A validated scenario."""
+    """A validated scenario; weigher: the machine below the cone, or None (no weigher)."""
 
     duration: float
     model: ModelParams
@@ -40,3 +41,4 @@ class Scenario:
     rotation: RotationProfile
     particles: tuple[ParticleSpec, ...]
     output_interval: float = 0.01
+    weigher: WeigherParams | None = None

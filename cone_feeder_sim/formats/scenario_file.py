@@ -23,6 +23,8 @@ A scenario is a YAML mapping::
     solver: {rtol: 1.0e-5}        # optional integrator settings
     interactions: {enabled: true} # optional contact between pieces (default: the
                                   # parameter file's, off in table2.yaml: the paper's model)
+    weigher: {target: 0.5}        # optional multihead weigher below the cone ({} = the
+                                  # default machine of config/weigher.yaml); packs CSV
     output_interval: 0.01         # s, optional: interval of progress and trajectory output
     rotation: [[0.0, 0.0], [0.4, -10.47]]   # [t s, omega rad/s]; linear between, held after
     particles:
@@ -42,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from .parameter_file import load_model_params, read_yaml
+from .parameter_file import load_model_params, load_weigher_params, read_yaml
 from ..errors import ConeFeederError, ScenarioError
 from ..feeder.scenario import ParticleSpec, Scenario
 from ..physics.params import (
@@ -50,7 +52,7 @@ from ..physics.params import (
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import check_positions, resting_height
 
-SCENARIO_KEYS = ('duration', 'parameters', 'model', 'solver', 'interactions',
+SCENARIO_KEYS = ('duration', 'parameters', 'model', 'solver', 'interactions', 'weigher',
                  'output_interval', 'rotation', 'particles')
 PARTICLE_KEYS = ('position', 'velocity', 'on_surface')
 
@@ -135,8 +137,14 @@ def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenari
         except ScenarioError as exc:
             raise ScenarioError(f'{where}: {exc}') from exc
         particles.append(ParticleSpec(position=position, velocity=velocity, product=product))
+    weigher = None
+    if 'weigher' in content:  # weigher: {} is the default machine of config/weigher.yaml
+        try:
+            weigher = load_weigher_params(overrides=content['weigher'] or {})
+        except ConeFeederError as exc:
+            raise ScenarioError(str(exc)) from exc
     return Scenario(duration=duration, model=model, solver=solver, rotation=rotation,
-                    particles=tuple(particles), output_interval=interval)
+                    particles=tuple(particles), output_interval=interval, weigher=weigher)
 
 
 def load_scenario(path: str | Path) -> Scenario:

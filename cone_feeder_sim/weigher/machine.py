@@ -129,7 +129,8 @@ class Pack:
     One pack.
 
     index (from 1); t (s) discharge time; mass (kg, true); measured (kg, the readings'
-    sum); heads (hopper indices, 0-based); giveaway (kg, mass - target).
+    sum); heads (the heads discharged, 1-based like the channels); giveaway (kg,
+    mass - target).
     """
 
     index: int
@@ -188,9 +189,26 @@ class Weigher:
         self._t0 = self.t
 
     # inputs -------------------------------------------------------------------------------
-    def receive(self, channels: Iterable[int], masses: Iterable[float]) -> None:
-        """Put pieces that left the cone on their channels' troughs (channels 1-based)."""
-        for channel, mass in zip(channels, masses):
+    def receive(self, channels: Iterable[int], masses: Iterable[float],
+                times: Iterable[float] | None = None) -> None:
+        """
+        Put pieces that left the cone on their channels' troughs (channels 1-based).
+
+        times (s): when each piece left, at or after the machine's time (default: now); the
+        next :meth:`advance` carries it from then on, so a piece that left late in an
+        interval is not early at its pool hopper. Pieces go on in the order of their times.
+        """
+        channels = list(channels)
+        masses = list(masses)
+        times = [self.t] * len(channels) if times is None else [float(t) for t in times]
+        if not len(channels) == len(masses) == len(times):
+            raise ParameterError(f'receive needs as many channels, masses and times; got '
+                                 f'{len(channels)}, {len(masses)}, {len(times)}')
+        checked = []
+        for channel, mass, t in zip(channels, masses, times):  # all checked, then taken
+            if not (math.isfinite(t) and t >= self.t):
+                raise ParameterError(f'a piece cannot reach the weigher at {t!r} s, before '
+                                     f'its time {self.t} s')
             channel = int(channel)
             if not 1 <= channel <= self.params.heads:
                 raise ParameterError(f"channel {channel} is not one of the weigher's "
@@ -198,7 +216,10 @@ class Weigher:
             mass = float(mass)
             if not (math.isfinite(mass) and mass >= 0.0):
                 raise ParameterError(f'a piece mass must be finite and >= 0, got {mass!r}')
-            self._troughs[channel - 1].append([0.0, mass])
+            checked.append((t, channel, mass))
+        for t, channel, mass in sorted(checked, key=lambda item: item[0]):
+            lead = (t - self.t) * self.amplitude[channel - 1] / self.params.transport_time
+            self._troughs[channel - 1].append([-lead, mass])
             self.mass_in += mass
 
     def set_amplitude(self, amplitude: Any) -> None:
@@ -279,17 +300,17 @@ class Weigher:
         heads = list(chosen)
         mass = 0.0
         for c in heads:
-            mass += self.weigh[c]
+            mass += float(self.weigh[c])
         measured = 0.0
         for c in heads:
-            measured += self.reading[c]
+            measured += float(self.reading[c])
         self.weigh[heads] = 0.0
         self.reading[heads] = 0.0
         self._weighed_at[heads] = math.nan
         self._settled_at[heads] = math.nan
         self.packed += mass
         pack = Pack(index=len(self.packs) + 1, t=self.t, mass=mass, measured=measured,
-                    heads=tuple(heads), giveaway=mass - p.target)
+                    heads=tuple(c + 1 for c in heads), giveaway=mass - p.target)
         self.packs.append(pack)
         self._flow(self.t)  # emptied hoppers take their pools' content at once
         return pack

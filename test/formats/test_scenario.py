@@ -121,3 +121,17 @@ def test_bad_interactions_name_the_problem(value: object, fragment: str) -> None
     with pytest.raises(ScenarioError) as info:
         scenario_from_mapping({**VALID, 'interactions': value})
     assert fragment in str(info.value)
+
+
+def test_weigher_section() -> None:
+    from cone_feeder_sim.weigher.machine import WeigherParams
+    assert scenario_from_mapping(VALID).weigher is None  # no section: no weigher
+    assert scenario_from_mapping({**VALID, 'weigher': {}}).weigher == WeigherParams()
+    assert scenario_from_mapping({**VALID, 'weigher': None}).weigher == WeigherParams()
+    sc = scenario_from_mapping({**VALID, 'weigher': {'target': 0.5, 'heads': 10,
+                                                     'max_heads': 4}})
+    assert (sc.weigher.target, sc.weigher.heads, sc.weigher.max_heads) == (0.5, 10, 4)
+    for bad, name in [({'target': -1.0}, 'weigher.target'), ({'colour': 1}, 'colour'),
+                      ({'heads': 'many'}, 'weigher.heads'), ([1, 2], 'mapping')]:
+        with pytest.raises(ScenarioError, match=name):
+            scenario_from_mapping({**VALID, 'weigher': bad})

@@ -39,7 +39,7 @@ def test_a_piece_rides_its_trough_passes_the_gate_settles_and_is_packed() -> Non
     packs = w.advance(2.99)
     assert w.available()[1] and not packs
     packs = w.advance(3.0)  # the cycle at 3 s packs it
-    assert [(pk.t, pk.mass, pk.heads) for pk in packs] == [(3.0, 0.12, (1,))]
+    assert [(pk.t, pk.mass, pk.heads) for pk in packs] == [(3.0, 0.12, (2,))]
     assert packs[0].giveaway == pytest.approx(0.02)
 
 
@@ -56,6 +56,21 @@ def test_amplitude_scales_the_trough_and_zero_stops_it() -> None:
         w.set_amplitude([1.0, math.nan])
     with pytest.raises(ParameterError, match='2 values'):
         w.set_amplitude([1.0])
+
+
+def test_a_piece_rides_from_the_time_it_left_the_cone() -> None:
+    p = WeigherParams(heads=2, max_heads=2, transport_time=1.0, load_cell_noise=0.0)
+    w = Weigher(p)
+    w.receive([1, 1], [0.2, 0.1], times=[0.3, 0.1])  # the later one goes on second
+    w.advance(1.099)
+    assert w.pool.sum() + w.gate.sum() == 0.0
+    w.advance(1.1)
+    assert w.gate[0] == 0.1 and w.in_troughs()[0] == 0.2
+    with pytest.raises(ParameterError, match='before'):
+        w.receive([1], [0.1], times=[0.5])
+    with pytest.raises(ParameterError, match='as many'):
+        w.receive([1], [0.1, 0.2])
+    assert w.mass_in == pytest.approx(0.3)  # refused pieces are not taken
 
 
 def test_order_is_kept_on_a_trough() -> None:
