@@ -70,6 +70,7 @@ from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
     add_particles, advance, as_points, check_positions, ExitEvents, Failure, SimParams, SimState,
     StepStats, warm_up, world_from_cone)
+from ..weigher.machine import check_heads_match, Pack, Weigher, WeigherParams
 
 __all__ = [
     'DriveParams',
@@ -241,7 +242,9 @@ class EngineConfig:
     Everything a run depends on besides its inputs.
 
     dt (s) the simulated time per tick; seed of the feed generator; initial_pieces placed at
-    t = 0 and after every reset (velocity None: lying on the resting cone).
+    t = 0 and after every reset (velocity None: lying on the resting cone); weigher: the
+    multihead weigher below the cone, or None (it starts empty at t = 0 and at every
+    reset).
     """
 
     model: ModelParams = ModelParams()
@@ -252,6 +255,7 @@ class EngineConfig:
     initial_pieces: tuple[PieceSpec, ...] = ()
     seed: int = 0
     spawn_max_height: float = 1.0
+    weigher: WeigherParams | None = None
 
     def __post_init__(self) -> None:
         """Validate dt, the seed, the feed annulus and the initial pieces."""
@@ -259,6 +263,8 @@ class EngineConfig:
         object.__setattr__(self, 'seed', check_integer('seed', self.seed,
                                                        ENGINE_LIMITS['seed']))
         check_feed_fits(self.model, self.feed)
+        if self.weigher is not None:
+            check_heads_match(self.weigher, self.model.channels.count)
         object.__setattr__(self, 'spawn_max_height', check_number(
             'spawn.max_height', self.spawn_max_height, ENGINE_LIMITS['spawn_max_height']))
         object.__setattr__(self, 'initial_pieces', tuple(self.initial_pieces))
@@ -345,7 +351,9 @@ class TickResult:
     refusals: pieces of applied spawns refused (the cone held feed.max_pieces); mass_in,
     failed_mass (kg): cumulative mass placed on the cone and removed by failed integration
     since the start or the last reset, so that mass_in = masses.sum() +
-    channel_mass.sum() + failed_mass to round-off.
+    channel_mass.sum() + failed_mass to round-off. With a weigher: packs made in the tick
+    and hoppers (heads,) the weigh hoppers' readings at t (kg, 0 = not weighed yet); the
+    exits of the tick are on its troughs (its balance is :attr:`FeederEngine.weigher`).
     """
 
     index: int
@@ -370,6 +378,8 @@ class TickResult:
     refusals: tuple[Refusal, ...] = ()
     mass_in: float = 0.0
     failed_mass: float = 0.0
+    packs: tuple[Pack, ...] = ()
+    hoppers: np.ndarray | None = None
 
     @property
     def count(self) -> int:
@@ -440,6 +450,8 @@ class FeederEngine:
         self._channel_mass[:] = 0.0
         self._failed_mass = 0.0
         self._rng = np.random.default_rng(self._config.seed)
+        self._weigher = (Weigher(self._config.weigher, t) if self._config.weigher is not None
+                         else None)
         for piece in self._config.initial_pieces:
             self._state, _ = add_particles(
                 self._state, self._sim_params, [piece.position],
@@ -453,6 +465,11 @@ class FeederEngine:
     def config(self) -> EngineConfig:
         """Return the configuration the engine was built with (drive/feed: initial ones)."""
         return self._config
+
+    @property
+    def weigher(self) -> Weigher | None:
+        """Return the weigher below the cone (its state after the last tick), or None."""
+        return self._weigher
 
     @property
     def drive(self) -> DriveParams:
@@ -700,6 +717,12 @@ class FeederEngine:
         if len(exits):
             np.add.at(self._channel_mass, exits.channel - 1, exits.mass)
         self._failed_mass += sum(failure.mass for failure in step.failures)
+        packs: tuple[Pack, ...] = ()
+        hoppers = None
+        if self._weigher is not None:
+            self._weigher.receive(exits.channel, exits.mass, exits.t)
+            packs = tuple(self._weigher.advance(t1))
+            hoppers = self._weigher.hopper_readings()
         q, qdot, _ = world_from_cone(self._state.y, self._state.angle, self._omega)
         return TickResult(
             index=index, t0=t0, t=t1, angle=self._state.angle, omega=self._omega,
@@ -708,4 +731,4 @@ class FeederEngine:
             failures=step.failures, stats=step.stats, channel_mass=self._channel_mass.copy(),
             applied=applied, spawned_ids=np.concatenate(spawned), feed_ids=feed_ids,
             reset=was_reset, refusals=tuple(self._refusals), mass_in=self._mass_in,
-            failed_mass=self._failed_mass)
+            failed_mass=self._failed_mass, packs=packs, hoppers=hoppers)

@@ -43,7 +43,7 @@ from .combination import select_combination
 from ..errors import ParameterError
 from ..physics.params import check_integer, check_number, Limit
 
-__all__ = ['Pack', 'Weigher', 'WEIGHER_LIMITS', 'WeigherParams', 'WeigherStats',
+__all__ = ['check_heads_match', 'Pack', 'Weigher', 'WEIGHER_LIMITS', 'WeigherParams', 'WeigherStats',
            'weigher_params_from_mapping']
 
 #: Ranges of the weigher's parameters (units in the third field).
@@ -104,6 +104,13 @@ class WeigherParams:
     def cycle(self) -> float:
         """Return the machine cycle in s."""
         return 60.0 / self.cycles_per_minute
+
+
+def check_heads_match(params: WeigherParams, channels: int) -> None:
+    """Refuse a weigher whose heads are not the cone's channels (one head per channel)."""
+    if params.heads != channels:
+        raise ParameterError(f"parameter 'weigher.heads' ({params.heads}) must equal the "
+                             f"cone's channel count (model.channel_count = {channels})")
 
 
 def weigher_params_from_mapping(mapping: Any, base: WeigherParams | None = None) -> WeigherParams:
@@ -325,6 +332,10 @@ class Weigher:
         return {'in': self.mass_in, 'troughs': float(self.in_troughs().sum()),
                 'pools': float(self.pool.sum()), 'gates': float(self.gate.sum()),
                 'weigh': float(self.weigh.sum()), 'packed': self.packed}
+
+    def hopper_readings(self) -> np.ndarray:
+        """Return the weigh hoppers' readings, (heads,) kg; 0 where not weighed yet."""
+        return np.where(self.available(), self.reading, 0.0)
 
     def available(self) -> np.ndarray:
         """Return which weigh hoppers are weighed and take part in the next cycle, (heads,)."""

@@ -500,3 +500,25 @@ def test_no_contact_kernel_is_compiled_inside_a_tick() -> None:
     for _ in range(30):
         eng.tick()
     assert (list(advance_island.signatures), list(_contact_pairs.signatures)) == loaded
+
+
+def test_the_weigher_below_the_cone_takes_every_exit() -> None:
+    from cone_feeder_sim.weigher.machine import WeigherParams
+    weigher = WeigherParams(target=0.2, transport_time=0.5, load_cell_noise=0.0)
+    engine = FeederEngine(EngineConfig(drive=DriveParams(pattern=((2.0, -8.0), (2.0, 8.0))),
+                                       feed=FeedParams(rate=5.0), weigher=weigher))
+    packs, exits = [], 0.0
+    for _ in range(1000):  # 20 s
+        result = engine.tick()
+        packs += result.packs
+        exits += float(result.exits.mass.sum())
+        assert result.hoppers.shape == (14,)
+    balance = engine.weigher.balance()
+    assert balance['in'] == pytest.approx(exits, rel=1e-12)
+    held = sum(v for k, v in balance.items() if k != 'in')
+    assert held == pytest.approx(balance['in'], rel=1e-12)
+    assert len(packs) > 5 and all(pack.mass >= 0.2 for pack in packs)
+    assert [pack.index for pack in packs] == list(range(1, len(packs) + 1))
+    # a machine whose heads are not the channels is refused
+    with pytest.raises(ParameterError, match='weigher.heads'):
+        EngineConfig(weigher=WeigherParams(heads=10, max_heads=10))
