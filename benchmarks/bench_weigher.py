@@ -60,7 +60,7 @@ def time_ticks(count: int, ticks: int = 500) -> tuple[float, float]:
     for _ in range(50):
         engine.tick()
     engine_s = weigher_s = 0.0
-    for k in range(ticks):
+    for _ in range(ticks):
         start = time.perf_counter()
         engine.tick()
         engine_s += time.perf_counter() - start

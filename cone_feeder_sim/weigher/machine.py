@@ -43,8 +43,8 @@ from .combination import select_combination
 from ..errors import ParameterError
 from ..physics.params import check_integer, check_number, Limit
 
-__all__ = ['check_heads_match', 'Pack', 'Weigher', 'WEIGHER_LIMITS', 'WeigherParams', 'WeigherStats',
-           'weigher_params_from_mapping']
+__all__ = ['check_heads_match', 'Pack', 'Weigher', 'WEIGHER_LIMITS', 'WeigherParams',
+           'WeigherStats', 'weigher_params_from_mapping']
 
 #: Ranges of the weigher's parameters (units in the third field).
 WEIGHER_LIMITS: dict[str, Limit] = {
