@@ -70,7 +70,7 @@ from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
     add_particles, advance, as_points, check_positions, ExitEvents, Failure, SimParams, SimState,
     StepStats, warm_up, world_from_cone)
-from ..weigher.machine import check_heads_match, Pack, Weigher, WeigherParams
+from ..weigher.machine import Pack, Weigher, WeigherParams, WeigherStats
 
 __all__ = [
     'DriveParams',
@@ -263,8 +263,8 @@ class EngineConfig:
         object.__setattr__(self, 'seed', check_integer('seed', self.seed,
                                                        ENGINE_LIMITS['seed']))
         check_feed_fits(self.model, self.feed)
-        if self.weigher is not None:
-            check_heads_match(self.weigher, self.model.channels.count)
+        if self.weigher is not None:  # one head per channel, a combination it can choose
+            Weigher(self.weigher, self.model.channels.count)
         object.__setattr__(self, 'spawn_max_height', check_number(
             'spawn.max_height', self.spawn_max_height, ENGINE_LIMITS['spawn_max_height']))
         object.__setattr__(self, 'initial_pieces', tuple(self.initial_pieces))
@@ -352,7 +352,8 @@ class TickResult:
     failed_mass (kg): cumulative mass placed on the cone and removed by failed integration
     since the start or the last reset, so that mass_in = masses.sum() +
     channel_mass.sum() + failed_mass to round-off. With a weigher: packs made in the tick
-    and hoppers (heads,) the weigh hoppers' readings at t (kg, 0 = not weighed yet); the
+    and hoppers (heads,) the weigh hoppers' readings at t (kg, 0 = not weighed yet),
+    weigher_stats its statistics since the start or the last reset; the
     exits of the tick are on its troughs (its balance is :attr:`FeederEngine.weigher`).
     """
 
@@ -380,6 +381,7 @@ class TickResult:
     failed_mass: float = 0.0
     packs: tuple[Pack, ...] = ()
     hoppers: np.ndarray | None = None
+    weigher_stats: WeigherStats | None = None
 
     @property
     def count(self) -> int:
@@ -450,8 +452,8 @@ class FeederEngine:
         self._channel_mass[:] = 0.0
         self._failed_mass = 0.0
         self._rng = np.random.default_rng(self._config.seed)
-        self._weigher = (Weigher(self._config.weigher, t) if self._config.weigher is not None
-                         else None)
+        self._weigher = (Weigher(self._config.weigher, self._config.model.channels.count, t)
+                         if self._config.weigher is not None else None)
         for piece in self._config.initial_pieces:
             self._state, _ = add_particles(
                 self._state, self._sim_params, [piece.position],
@@ -718,11 +720,12 @@ class FeederEngine:
             np.add.at(self._channel_mass, exits.channel - 1, exits.mass)
         self._failed_mass += sum(failure.mass for failure in step.failures)
         packs: tuple[Pack, ...] = ()
-        hoppers = None
+        hoppers = weigher_stats = None
         if self._weigher is not None:
             self._weigher.receive(exits.channel, exits.mass, exits.t)
             packs = tuple(self._weigher.advance(t1))
             hoppers = self._weigher.hopper_readings()
+            weigher_stats = self._weigher.stats()
         q, qdot, _ = world_from_cone(self._state.y, self._state.angle, self._omega)
         return TickResult(
             index=index, t0=t0, t=t1, angle=self._state.angle, omega=self._omega,
@@ -731,4 +734,5 @@ class FeederEngine:
             failures=step.failures, stats=step.stats, channel_mass=self._channel_mass.copy(),
             applied=applied, spawned_ids=np.concatenate(spawned), feed_ids=feed_ids,
             reset=was_reset, refusals=tuple(self._refusals), mass_in=self._mass_in,
-            failed_mass=self._failed_mass, packs=packs, hoppers=hoppers)
+            failed_mass=self._failed_mass, packs=packs, hoppers=hoppers,
+            weigher_stats=weigher_stats)

@@ -84,7 +84,8 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
         sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
                 [spec.product])
     result = RunResult()
-    weigher = Weigher(scenario.weigher) if scenario.weigher is not None else None
+    weigher = (Weigher(scenario.weigher, scenario.model.channels.count)
+               if scenario.weigher is not None else None)
     k = 0
     while sim.t < scenario.duration and sim.state.count:
         if stop is not None and stop():

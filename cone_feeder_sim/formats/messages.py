@@ -28,9 +28,10 @@ from typing import Any
 import numpy as np
 
 from .cdr import CdrCodec, CdrError, default_codec
-from .pointcloud import EXIT_DTYPE, point_fields, STATE_DTYPE
+from .pointcloud import EXIT_DTYPE, PACK_DTYPE, point_fields, STATE_DTYPE
 from ..physics.params import ModelParams
 from ..physics.simulation import ExitEvents
+from ..weigher.machine import Pack
 
 __all__ = [
     'pose_array_positions',
@@ -41,6 +42,8 @@ __all__ = [
     'cone_state_message',
     'exits_message',
     'header',
+    'hopper_weights_message',
+    'packs_message',
     'particles_message',
     'stamp',
     'stamp_ns',
@@ -113,6 +116,23 @@ def exits_message(head: dict[str, Any], exits: ExitEvents) -> dict[str, Any]:
     rows['id'] = exits.ids & 0xFFFFFFFF
     rows['channel'] = exits.channel
     return _cloud(head, rows)
+
+
+def packs_message(head: dict[str, Any], packs: tuple[Pack, ...]) -> dict[str, Any]:
+    """Return the pack_events PointCloud2 (layout :data:`PACK_DTYPE`)."""
+    rows = np.zeros(len(packs), dtype=PACK_DTYPE)
+    for i, pack in enumerate(packs):
+        rows[i] = (pack.t, pack.mass, pack.measured, pack.giveaway, pack.index,
+                   sum(1 << (h - 1) for h in pack.heads))
+    return _cloud(head, rows)
+
+
+def hopper_weights_message(readings: np.ndarray) -> dict[str, Any]:
+    """Return the std_msgs/Float64MultiArray of the weigh hoppers' readings (kg; 0: none)."""
+    count = readings.shape[0]
+    return {'layout': {'dim': [{'label': 'head', 'size': count, 'stride': count}],
+                       'data_offset': 0},
+            'data': readings}
 
 
 def channel_mass_message(channel_mass: np.ndarray) -> dict[str, Any]:

@@ -30,8 +30,8 @@ import numpy as np
 
 from ..errors import MessageError
 
-__all__ = ['EXIT_DTYPE', 'POINT_FIELD_TYPES', 'STATE_DTYPE', 'cloud_points', 'point_dtype',
-           'point_fields']
+__all__ = ['EXIT_DTYPE', 'PACK_DTYPE', 'POINT_FIELD_TYPES', 'STATE_DTYPE', 'cloud_points',
+           'point_dtype', 'point_fields']
 
 #: sensor_msgs/PointField datatypes -> numpy type codes (without byte order).
 POINT_FIELD_TYPES = {1: 'i1', 2: 'u1', 3: 'i2', 4: 'u2', 5: 'i4', 6: 'u4', 7: 'f4', 8: 'f8'}
@@ -51,6 +51,16 @@ EXIT_DTYPE = np.dtype({
     'formats': ['<f8'] * 9 + ['<u4', '<u4'],
     'offsets': [0, 8, 16, 24, 32, 40, 48, 56, 64, 72, 76],
     'itemsize': 80})
+
+
+#: ``pack_events`` points: t (s, discharge time), mass (kg, true), measured (kg, the load
+#: cells' sum), giveaway (kg), pack (index from 1), heads (bit h-1 set: head h discharged);
+#: 40 bytes.
+PACK_DTYPE = np.dtype({
+    'names': ['t', 'mass', 'measured', 'giveaway', 'pack', 'heads'],
+    'formats': ['<f8'] * 4 + ['<u4', '<u4'],
+    'offsets': [0, 8, 16, 24, 32, 36],
+    'itemsize': 40})
 
 
 @functools.cache

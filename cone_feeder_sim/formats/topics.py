@@ -197,6 +197,8 @@ TOPICS: Mapping[str, TopicSpec] = {spec.name: spec for spec in (
     TopicSpec('exit_events', 'sensor_msgs/msg/PointCloud2', 'out', EVENTS_QOS),
     TopicSpec('channel_mass', 'std_msgs/msg/Float64MultiArray', 'out', LATCHED_QOS),
     TopicSpec('cone_state', 'sensor_msgs/msg/JointState', 'out', STATE_QOS),
+    TopicSpec('hopper_weights', 'std_msgs/msg/Float64MultiArray', 'out', LATCHED_QOS),
+    TopicSpec('pack_events', 'sensor_msgs/msg/PointCloud2', 'out', EVENTS_QOS),
     TopicSpec('markers', 'visualization_msgs/msg/MarkerArray', 'out', LATCHED_QOS),
     TopicSpec('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', 'out', STATE_QOS),
     TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', 'out', CLOCK_QOS),

@@ -38,12 +38,13 @@ from ..errors import ParameterError
 from ..feeder.engine import (
     DriveParams, ENGINE_LIMITS, EngineConfig, FeedParams, pattern_from_flat, PieceSpec)
 from ..formats.mcap_writer import COMPRESSIONS
-from ..formats.parameter_file import config_dir
+from ..formats.parameter_file import config_dir, load_weigher_params
 from ..formats.runlog import DEFAULT_RECORD_PATH, model_parameter_values
 from ..formats.scenario_file import load_scenario
 from ..physics.params import (
     CHANNEL_KEYS, INTERACTION_LIMITS, InteractionParams, Limit, MODEL_KEYS, MODEL_LIMITS,
     model_params_from_mapping, ModelParams, PRODUCT_LIMITS, SOLVER_LIMITS, SolverParams)
+from ..weigher.machine import WEIGHER_LIMITS, WeigherParams
 
 __all__ = [
     'DRIVE_PARAMETERS',
@@ -359,7 +360,37 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
                   limit=INTERACTION_LIMITS['max_island']),
     ]
     specs += model_param_specs(model)
+    specs += weigher_param_specs()
     return specs
+
+
+def weigher_param_specs() -> list[ParamSpec]:
+    """Return the ``weigher.*`` parameters: on/off and one per key of config/weigher.yaml."""
+    machine = load_weigher_params()
+    specs = [ParamSpec('weigher.enabled', True, 'run the multihead weigher below the cone: '
+                       'dosing channels, pool and weigh hoppers, packs (hopper_weights, '
+                       'pack_events, /diagnostics)')]
+    for key, limit in WEIGHER_LIMITS.items():
+        specs.append(ParamSpec(f'weigher.{key}', getattr(machine, key),
+                               f'{WEIGHER_DESCRIPTIONS[key]}; default from config/weigher.yaml',
+                               limit=limit))
+    return specs
+
+
+#: What each weigher key means (units in the range), for the parameter descriptions.
+WEIGHER_DESCRIPTIONS = {
+    'target': 'pack target weight (kg)',
+    'max_over': 'most a pack may exceed the target (kg); 0 = no limit',
+    'tolerable_negative_error': 'tolerable negative error below the target (kg)',
+    'min_heads': 'fewest hoppers in a pack',
+    'max_heads': 'most hoppers in a pack',
+    'cycles_per_minute': 'machine cycles per minute',
+    'transport_time': 'dosing channel transport time, rim to pool hopper (s)',
+    'gate_time': 'pool hopper to weigh hopper (s)',
+    'settle_time': 'weigh hopper settling before weighing (s)',
+    'load_cell_noise': 'standard deviation of one weighing (kg)',
+    'seed': 'seed of the load-cell noise',
+}
 
 
 def _array(value: Any) -> list[float]:
@@ -412,7 +443,10 @@ def engine_config_from_values(values: dict[str, Any], base: ModelParams) -> Engi
         PieceSpec(p, product=model.product.with_overrides({'d': damping[i]})
                   if damping else None)
         for i, p in enumerate(positions))
+    weigher = None
+    if values['weigher.enabled']:
+        weigher = WeigherParams(**{key: values[f'weigher.{key}'] for key in WEIGHER_LIMITS})
     return EngineConfig(model=model, solver=solver, dt=1.0 / values['update_rate'],
                         drive=drive_from_values(values), feed=feed_from_values(values),
                         initial_pieces=pieces, seed=values['feed.seed'],
-                        spawn_max_height=values['spawn.max_height'])
+                        spawn_max_height=values['spawn.max_height'], weigher=weigher)

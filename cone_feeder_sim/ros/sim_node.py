@@ -139,8 +139,9 @@ from ..feeder.engine import check_feed_fits, FeederEngine, MAX_PENDING_INPUTS, T
 from ..formats.cdr import CdrError, default_codec
 from ..formats.mcap_writer import COMPRESSIONS
 from ..formats.messages import (
-    channel_mass_message, clock_message, cone_state_message, exits_message, header, MarkerBuilder,
-    MarkerSchedule, particles_message, pose_array_positions, stamp, stamp_ns, states_message)
+    channel_mass_message, clock_message, cone_state_message, exits_message, header,
+    hopper_weights_message, MarkerBuilder, MarkerSchedule, packs_message, particles_message,
+    pose_array_positions, stamp, stamp_ns, states_message)
 from ..formats.parameter_file import load_model_params
 from ..formats.run_recorder import RecordingLimits, RunRecorder
 from ..formats.runlog import (
@@ -150,6 +151,7 @@ from ..formats.topics import MessageRecord, QosProfile, TOPICS
 from ..physics.integrator import set_threads
 from ..physics.params import ModelParams
 from ..physics.simulation import position_problems
+from ..weigher.machine import WeigherStats
 
 __all__ = ['SimNode', 'TopicInfo', 'main']
 
@@ -274,6 +276,8 @@ class SimNode(GuardedNode):
         self._pub_exits = self._publisher(PointCloud2, 'exit_events')
         self._pub_channel = self._publisher(Float64MultiArray, 'channel_mass')
         self._pub_cone = self._publisher(JointState, 'cone_state')
+        self._pub_hoppers = self._publisher(Float64MultiArray, 'hopper_weights')
+        self._pub_packs = self._publisher(PointCloud2, 'pack_events')
         self._pub_markers = self._publisher(MarkerArray, 'markers')
         self._pub_diag = self._publisher(DiagnosticArray, '/diagnostics')
         self._pub_clock = (self._publisher(ClockMessage, '/clock')
@@ -880,11 +884,34 @@ class SimNode(GuardedNode):
             self._publish(self._pub_exits, exits_message(head, res.exits), t_ns)
         self._publish(self._pub_channel, channel_mass_message(res.channel_mass), t_ns)
         self._publish(self._pub_cone, cone_state_message(head, res.angle, res.omega), t_ns)
+        if res.hoppers is not None:
+            self._publish(self._pub_hoppers, hopper_weights_message(res.hoppers), t_ns)
+        if res.packs:
+            self._publish(self._pub_packs, packs_message(head, res.packs), t_ns)
         if self._markers.due(res.t, res.reset):
             self._publish(self._pub_markers, self._marker_builder.message(
                 head, res.angle, res.positions), t_ns)
 
     # ------------------------------------------------------------------ diagnostics
+
+    def _weigher_status(self, stats: WeigherStats) -> dict[str, Any]:
+        """Return the diagnostic status of the weigher: its pack statistics so far."""
+        values = {
+            'packs': str(stats.packs),
+            'packs per minute': f'{stats.packs_per_minute:.2f}',
+            'giveaway mean (g)': f'{1e3 * stats.giveaway_mean:.2f}',
+            'giveaway std (g)': f'{1e3 * stats.giveaway_std:.2f}',
+            'under target (fraction)': f'{stats.under_target:.4f}',
+            'below target - TNE (fraction)': f'{stats.below_tne:.4f}',
+            'starved heads per cycle': f'{stats.starved_per_cycle:.2f}',
+            'cycles': str(stats.cycles),
+        }
+        level = 1 if stats.below_tne > 0.0 else 0
+        message = (f'{stats.packs} packs, {stats.packs_per_minute:.1f}/min, giveaway '
+                   f'{1e3 * stats.giveaway_mean:.1f} g')
+        return {'level': level, 'name': f'{self.get_fully_qualified_name()}: weigher',
+                'message': message, 'hardware_id': 'cone_feeder',
+                'values': [{'key': k, 'value': v} for k, v in values.items()]}
 
     def _recording_status(self) -> dict[str, Any]:
         """Return the diagnostic status of the recording: OK, off, or ERROR once it stopped."""
@@ -968,6 +995,8 @@ class SimNode(GuardedNode):
                         'message': message, 'hardware_id': 'cone_feeder',
                         'values': [{'key': k, 'value': v} for k, v in values.items()]},
                        self._recording_status()]}
+        if res is not None and res.weigher_stats is not None:
+            message_dict['status'].append(self._weigher_status(res.weigher_stats))
         self._publish(self._pub_diag, message_dict, self._now_ns())
         if not self._paused:
             self._window = _Window(now, self._engine.t)

@@ -39,16 +39,15 @@ from typing import Any
 
 import numpy as np
 
-from .combination import select_combination
+from .combination import MAX_SUBSETS, select_combination, subset_count
 from ..errors import ParameterError
-from ..physics.params import check_integer, check_number, Limit
+from ..physics.params import check_integer, check_number, Limit, MODEL_LIMITS
 
-__all__ = ['check_heads_match', 'Pack', 'Weigher', 'WEIGHER_LIMITS', 'WeigherParams',
+__all__ = ['HEADS_LIMIT', 'Pack', 'Weigher', 'WEIGHER_LIMITS', 'WeigherParams',
            'WeigherStats', 'weigher_params_from_mapping']
 
 #: Ranges of the weigher's parameters (units in the third field).
 WEIGHER_LIMITS: dict[str, Limit] = {
-    'heads': Limit(1, 32, 'heads'),
     'target': Limit(0.0, 100.0, 'kg', lo_open=True),
     'max_over': Limit(0.0, 100.0, 'kg'),
     'tolerable_negative_error': Limit(0.0, 100.0, 'kg'),
@@ -61,7 +60,9 @@ WEIGHER_LIMITS: dict[str, Limit] = {
     'load_cell_noise': Limit(0.0, 1.0, 'kg'),
     'seed': Limit(0, 2 ** 63 - 1, ''),
 }
-_INTEGERS = ('heads', 'min_heads', 'max_heads', 'seed')
+_INTEGERS = ('min_heads', 'max_heads', 'seed')
+#: Heads of a machine: one per channel of the cone (the range of model.channel_count).
+HEADS_LIMIT = MODEL_LIMITS['channel_count']
 
 
 @dataclass(frozen=True)
@@ -69,16 +70,15 @@ class WeigherParams:
     """
     The machine below the cone (config/weigher.yaml; ranges in :data:`WEIGHER_LIMITS`).
 
-    heads: dosing channels, each with a pool and a weigh hopper (the paper's machine has
-    14); target (kg) pack target; max_over (kg) most a pack may exceed the target (0 = no
-    limit); tolerable_negative_error (kg) the legal TNE below the target; min_heads,
-    max_heads hoppers per pack; cycles_per_minute machine cycles; transport_time (s) rim
-    to pool hopper at feed amplitude 1; gate_time (s) pool to weigh hopper; settle_time (s)
-    before a weigh hopper is weighed; load_cell_noise (kg) standard deviation of one
-    weighing; seed of the load-cell noise.
+    The machine has one head (dosing channel, pool and weigh hopper) per channel of the
+    cone: the paper's has 14. target (kg) pack target; max_over (kg) most a pack may
+    exceed the target (0 = no limit); tolerable_negative_error (kg) the legal TNE below
+    the target; min_heads, max_heads hoppers per pack; cycles_per_minute machine cycles;
+    transport_time (s) rim to pool hopper at feed amplitude 1; gate_time (s) pool to weigh
+    hopper; settle_time (s) before a weigh hopper is weighed; load_cell_noise (kg)
+    standard deviation of one weighing; seed of the load-cell noise.
     """
 
-    heads: int = 14
     target: float = 1.0
     max_over: float = 0.0
     tolerable_negative_error: float = 0.015
@@ -104,13 +104,6 @@ class WeigherParams:
     def cycle(self) -> float:
         """Return the machine cycle in s."""
         return 60.0 / self.cycles_per_minute
-
-
-def check_heads_match(params: WeigherParams, channels: int) -> None:
-    """Refuse a weigher whose heads are not the cone's channels (one head per channel)."""
-    if params.heads != channels:
-        raise ParameterError(f"parameter 'weigher.heads' ({params.heads}) must equal the "
-                             f"cone's channel count (model.channel_count = {channels})")
 
 
 def weigher_params_from_mapping(mapping: Any, base: WeigherParams | None = None) -> WeigherParams:
@@ -171,10 +164,17 @@ class WeigherStats:
 class Weigher:
     """The weigher's state, advanced in time by :meth:`advance`; see the module docs."""
 
-    def __init__(self, params: WeigherParams, t0: float = 0.0) -> None:
-        """Start an empty machine at t0 (s); the first cycle is one cycle later."""
+    def __init__(self, params: WeigherParams, heads: int = 14, t0: float = 0.0) -> None:
+        """Start an empty machine of ``heads`` heads at t0 (s); the first cycle one later."""
         self.params = params
-        heads = params.heads
+        heads = check_integer('heads (model.channel_count)', heads, HEADS_LIMIT)
+        count = subset_count(heads, params.min_heads, params.max_heads)
+        if count > MAX_SUBSETS:
+            raise ParameterError(
+                f"parameter 'weigher.max_heads': {heads} heads with {params.min_heads}.."
+                f'{params.max_heads} per pack are {count:,} combinations, more than '
+                f'{MAX_SUBSETS:,} to choose from each cycle; lower weigher.max_heads')
+        self.heads = heads
         self.t = float(t0)
         self.amplitude = np.ones(heads)
         #: per channel: [progress in [0, 1), mass] of the pieces on the trough, oldest first
@@ -194,6 +194,11 @@ class Weigher:
         self._cycles = 0
         self._starved = 0
         self._t0 = self.t
+        # running statistics of the giveaway (Welford), so stats() costs O(1)
+        self._mean = 0.0
+        self._m2 = 0.0
+        self._under = 0
+        self._below = 0
 
     # inputs -------------------------------------------------------------------------------
     def receive(self, channels: Iterable[int], masses: Iterable[float],
@@ -217,9 +222,9 @@ class Weigher:
                 raise ParameterError(f'a piece cannot reach the weigher at {t!r} s, before '
                                      f'its time {self.t} s')
             channel = int(channel)
-            if not 1 <= channel <= self.params.heads:
+            if not 1 <= channel <= self.heads:
                 raise ParameterError(f"channel {channel} is not one of the weigher's "
-                                     f'{self.params.heads} channels')
+                                     f'{self.heads} channels')
             mass = float(mass)
             if not (math.isfinite(mass) and mass >= 0.0):
                 raise ParameterError(f'a piece mass must be finite and >= 0, got {mass!r}')
@@ -232,8 +237,8 @@ class Weigher:
     def set_amplitude(self, amplitude: Any) -> None:
         """Set the feed amplitude of every channel, (heads,) in [0, 2]; 0 stops a trough."""
         values = np.asarray(amplitude, dtype=float).reshape(-1)
-        if values.shape != (self.params.heads,):
-            raise ParameterError(f'amplitude needs {self.params.heads} values, got '
+        if values.shape != (self.heads,):
+            raise ParameterError(f'amplitude needs {self.heads} values, got '
                                  f'{values.shape[0]}')
         if not (np.isfinite(values).all() and (values >= 0.0).all() and (values <= 2.0).all()):
             raise ParameterError(f'amplitude values must be in [0, 2], got {values.tolist()}')
@@ -260,7 +265,7 @@ class Weigher:
         dt = t1 - self.t
         if dt < 0.0:
             raise ParameterError(f'time must not go back: {t1} < {self.t}')
-        for c in range(p.heads):
+        for c in range(self.heads):
             trough = self._troughs[c]
             step = self.amplitude[c] * dt / p.transport_time
             for piece in trough:
@@ -296,7 +301,7 @@ class Weigher:
         p = self.params
         self._cycles += 1
         available = ~np.isnan(self._weighed_at)
-        self._starved += int(p.heads - available.sum())
+        self._starved += int(self.heads - available.sum())
         weights = np.where(available, self.reading, 0.0)
         ages = np.where(available, self.t - np.nan_to_num(self._weighed_at), 0.0)
         chosen = select_combination(weights, p.target,
@@ -319,6 +324,12 @@ class Weigher:
         pack = Pack(index=len(self.packs) + 1, t=self.t, mass=mass, measured=measured,
                     heads=tuple(c + 1 for c in heads), giveaway=mass - p.target)
         self.packs.append(pack)
+        n = len(self.packs)
+        delta = pack.giveaway - self._mean
+        self._mean += delta / n
+        self._m2 += delta * (pack.giveaway - self._mean)
+        self._under += mass < p.target
+        self._below += mass < p.target - p.tolerable_negative_error
         self._flow(self.t)  # emptied hoppers take their pools' content at once
         return pack
 
@@ -342,17 +353,14 @@ class Weigher:
         return ~np.isnan(self._weighed_at)
 
     def stats(self) -> WeigherStats:
-        """Return the statistics of the packs so far."""
-        p = self.params
-        give = np.array([pack.giveaway for pack in self.packs])
-        mass = give + p.target
+        """Return the statistics of the packs so far (O(1): kept as the packs are made)."""
         minutes = (self.t - self._t0) / 60.0
         n = len(self.packs)
         return WeigherStats(
             packs=n, packs_per_minute=n / minutes if minutes > 0 else 0.0,
-            giveaway_mean=float(give.mean()) if n else 0.0,
-            giveaway_std=float(give.std(ddof=1)) if n > 1 else 0.0,
-            under_target=float((mass < p.target).mean()) if n else 0.0,
-            below_tne=float((mass < p.target - p.tolerable_negative_error).mean()) if n else 0.0,
+            giveaway_mean=self._mean if n else 0.0,
+            giveaway_std=math.sqrt(self._m2 / (n - 1)) if n > 1 else 0.0,
+            under_target=self._under / n if n else 0.0,
+            below_tne=self._below / n if n else 0.0,
             starved_per_cycle=self._starved / self._cycles if self._cycles else 0.0,
             cycles=self._cycles)

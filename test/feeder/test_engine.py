@@ -21,7 +21,8 @@ from cone_feeder_sim.feeder.engine import (
     drive_profile, DriveParams, EngineConfig, FeederEngine, FeedParams, MAX_PENDING_INPUTS,
     pattern_from_flat, PieceSpec, Reconfigure, ResetRequest, RotationCommand, SpawnRequest)
 from cone_feeder_sim.physics.integrator import advance_batch
-from cone_feeder_sim.physics.params import InteractionParams, ModelParams, SolverParams
+from cone_feeder_sim.physics.params import (
+    ChannelLayout, InteractionParams, ModelParams, SolverParams)
 from cone_feeder_sim.physics.simulation import resting_height
 import numpy as np
 import pytest
@@ -519,6 +520,8 @@ def test_the_weigher_below_the_cone_takes_every_exit() -> None:
     assert held == pytest.approx(balance['in'], rel=1e-12)
     assert len(packs) > 5 and all(pack.mass >= 0.2 for pack in packs)
     assert [pack.index for pack in packs] == list(range(1, len(packs) + 1))
-    # a machine whose heads are not the channels is refused
-    with pytest.raises(ParameterError, match='weigher.heads'):
-        EngineConfig(weigher=WeigherParams(heads=10, max_heads=10))
+    assert engine.weigher.heads == 14  # one head per channel of the cone
+    # a machine whose combinations cannot be enumerated each cycle is refused up front
+    with pytest.raises(ParameterError, match='weigher.max_heads'):
+        EngineConfig(model=ModelParams(channels=ChannelLayout(count=40)),
+                     weigher=WeigherParams(max_heads=14))

@@ -121,7 +121,11 @@ def test_engine_config_json_is_complete() -> None:
                                          'numbering': 'clockwise'}
     assert data['initial_pieces'][0]['position'] == [0.1, 0.0, 0.03]
     assert set(data) == {'model', 'solver', 'dt', 'drive', 'feed', 'initial_pieces', 'seed',
-                         'spawn_max_height'}
+                         'spawn_max_height', 'weigher'}
+    assert data['weigher'] is None
+    from cone_feeder_sim.weigher.machine import WeigherParams
+    data = json.loads(engine_config_json(EngineConfig(weigher=WeigherParams(target=0.4))))
+    assert data['weigher']['target'] == 0.4 and data['weigher']['seed'] == 0
 
 
 def test_expand_record_path(tmp_path: Path) -> None:

@@ -128,10 +128,10 @@ def test_weigher_section() -> None:
     assert scenario_from_mapping(VALID).weigher is None  # no section: no weigher
     assert scenario_from_mapping({**VALID, 'weigher': {}}).weigher == WeigherParams()
     assert scenario_from_mapping({**VALID, 'weigher': None}).weigher == WeigherParams()
-    sc = scenario_from_mapping({**VALID, 'weigher': {'target': 0.5, 'heads': 10,
-                                                     'max_heads': 4}})
-    assert (sc.weigher.target, sc.weigher.heads, sc.weigher.max_heads) == (0.5, 10, 4)
+    sc = scenario_from_mapping({**VALID, 'weigher': {'target': 0.5, 'max_heads': 4}})
+    assert (sc.weigher.target, sc.weigher.max_heads) == (0.5, 4)
     for bad, name in [({'target': -1.0}, 'weigher.target'), ({'colour': 1}, 'colour'),
-                      ({'heads': 'many'}, 'weigher.heads'), ([1, 2], 'mapping')]:
+                      ({'max_heads': 'many'}, 'weigher.max_heads'), ([1, 2], 'mapping'),
+                      ({'heads': 10}, 'heads')]:
         with pytest.raises(ScenarioError, match=name):
             scenario_from_mapping({**VALID, 'weigher': bad})

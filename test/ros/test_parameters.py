@@ -31,6 +31,7 @@ from cone_feeder_sim.physics.params import (
     solver_params_from_mapping)
 from cone_feeder_sim.ros.parameters import parameter_specs, table_i_pieces
 from cone_feeder_sim.ros.sim_node import SimNode
+from cone_feeder_sim.weigher.machine import WEIGHER_LIMITS, WeigherParams
 import pytest
 from rclpy.parameter import Parameter
 import sim_process
@@ -62,10 +63,12 @@ VALIDATION: dict[str, Callable[[Any], object]] = {
     'feed.max_pieces': _feed('max_pieces'),
     'feed.seed': lambda value: EngineConfig(seed=value),
     'spawn.max_height': lambda value: EngineConfig(spawn_max_height=value),
+    **{f'weigher.{key}': (lambda value, key=key: EngineConfig(
+        weigher=WeigherParams(**{key: value}))) for key in WEIGHER_LIMITS},
 }
 
 #: The tables the node's ranges must come from.
-TABLES = (PRODUCT_LIMITS, MODEL_LIMITS, SOLVER_LIMITS, ENGINE_LIMITS)
+TABLES = (PRODUCT_LIMITS, MODEL_LIMITS, SOLVER_LIMITS, ENGINE_LIMITS, WEIGHER_LIMITS)
 
 
 def edges(limit: Limit, integer: bool) -> list[Any]:
@@ -99,11 +102,12 @@ def node_accepts(harness: sim_process.InProcess, name: str, value: Any) -> bool:
 
     The node starts without initial pieces (a piece that no longer fits a changed cone would
     be refused for another reason than the value); for model parameters the feed annulus is
-    shrunk to the cone's axis for the same reason.
+    shrunk to the cone's axis and the weigher is off (with many channels its combinations
+    are refused) for the same reason.
     """
     base = {'record_path': '', 'initial_pieces.positions': [], 'initial_pieces.d': []}
-    if name.startswith('model.'):
-        base.update({'feed.rho_min': 0.0, 'feed.rho_max': 0.0})
+    if name.startswith('model.'):  # (and the weigher has a head per channel)
+        base.update({'feed.rho_min': 0.0, 'feed.rho_max': 0.0, 'weigher.enabled': False})
     base[name] = value
     overrides = [Parameter(k) if v == [] else Parameter(k, value=v) for k, v in base.items()]
     try:

@@ -24,7 +24,7 @@ from typing import Any
 
 from cone_feeder_sim.errors import ParameterError, ScenarioError
 from cone_feeder_sim.formats.cdr import decode
-from cone_feeder_sim.formats.pointcloud import EXIT_DTYPE, STATE_DTYPE
+from cone_feeder_sim.formats.pointcloud import EXIT_DTYPE, PACK_DTYPE, STATE_DTYPE
 from cone_feeder_sim.formats.topics import MessageRecord
 from cone_feeder_sim.physics.params import SolverParams
 from cone_feeder_sim.ros.parameters import parameter_specs
@@ -212,6 +212,38 @@ def latest(records: list[MessageRecord], topic: str) -> dict[str, Any]:
         if record.topic == topic:
             return decode(record.type_name, record.data)
     raise AssertionError(f'nothing published on {topic}')
+
+
+def test_the_weigher_publishes_hoppers_packs_and_statistics(ros: Ros) -> None:
+    sim = ros.sim(real_time_factor=0.0, **{'feed.rate': 20.0, 'weigher.target': 0.2,
+                                           'weigher.transport_time': 0.5})
+    records = collect(sim)
+
+    def weigher_status() -> bool:
+        return any(status['name'] == '/sim_node: weigher'
+                   for r in records if r.topic == '/diagnostics'
+                   for status in decode(r.type_name, r.data)['status'])
+
+    assert ros.spin_until(lambda: sum(r.topic == '/pack_events' for r in records) >= 3
+                          and weigher_status(), 120.0)
+    pause(ros, sim)
+    packs = []
+    for record in records:
+        if record.topic == '/pack_events':
+            msg = decode(record.type_name, record.data)
+            assert [f['name'] for f in msg['fields']] == list(PACK_DTYPE.names)
+            packs += list(np.frombuffer(msg['data'], dtype=PACK_DTYPE))
+    assert [int(p['pack']) for p in packs] == list(range(1, len(packs) + 1))
+    for p in packs:
+        assert p['mass'] >= 0.2 - 0.005 and p['giveaway'] == pytest.approx(p['mass'] - 0.2)
+        assert 0 < int(p['heads']) < 1 << 14
+    hoppers = latest(records, '/hopper_weights')
+    assert hoppers['layout']['dim'] == [{'label': 'head', 'size': 14, 'stride': 14}]
+    weigher = sim.engine.weigher
+    np.testing.assert_array_equal(hoppers['data'], weigher.hopper_readings())
+    balance = weigher.balance()
+    assert sum(p['mass'] for p in packs) == pytest.approx(balance['packed'], rel=1e-12)
+    assert balance['in'] == pytest.approx(float(sim.last_tick.channel_mass.sum()), rel=1e-12)
 
 
 def test_published_messages_carry_the_engine_state(ros: Ros) -> None:
@@ -466,7 +498,10 @@ def test_topics_are_relative_and_described_for_recording(ros: Ros) -> None:
     topics = {t.topic: t for t in sim.topics()}
     assert {'/line2/particles', '/line2/particle_states', '/line2/exit_events',
             '/line2/channel_mass', '/line2/cone_state', '/line2/markers', '/diagnostics',
-            '/line2/rotation_cmd', '/line2/spawn', '/line2/sim_node/events'} == set(topics)
+            '/line2/rotation_cmd', '/line2/spawn', '/line2/sim_node/events',
+            '/line2/hopper_weights', '/line2/pack_events'} == set(topics)
+    assert topics['/line2/hopper_weights'].qos.durability == 'transient_local'
+    assert topics['/line2/pack_events'].qos.depth == 1000
     assert topics['/line2/exit_events'].qos.depth == 1000
     assert topics['/line2/exit_events'].qos.reliability == 'reliable'
     assert topics['/line2/markers'].qos.durability == 'transient_local'

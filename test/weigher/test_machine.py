@@ -25,10 +25,10 @@ import pytest
 
 
 def test_a_piece_rides_its_trough_passes_the_gate_settles_and_is_packed() -> None:
-    p = WeigherParams(heads=3, target=0.1, min_heads=1, max_heads=3, transport_time=2.0,
+    p = WeigherParams(target=0.1, min_heads=1, max_heads=3, transport_time=2.0,
                       gate_time=0.3, settle_time=0.4, load_cell_noise=0.0,
                       cycles_per_minute=60.0)
-    w = Weigher(p)
+    w = Weigher(p, heads=3)
     w.receive([2], [0.12])
     w.advance(1.99)
     assert w.in_troughs()[1] == 0.12 and w.pool[1] == 0.0
@@ -44,8 +44,8 @@ def test_a_piece_rides_its_trough_passes_the_gate_settles_and_is_packed() -> Non
 
 
 def test_amplitude_scales_the_trough_and_zero_stops_it() -> None:
-    p = WeigherParams(heads=2, max_heads=2, transport_time=2.0, load_cell_noise=0.0)
-    w = Weigher(p)
+    p = WeigherParams(max_heads=2, transport_time=2.0, load_cell_noise=0.0)
+    w = Weigher(p, heads=2)
     w.set_amplitude([0.5, 0.0])
     w.receive([1, 2], [0.1, 0.1])
     w.advance(3.9)
@@ -59,8 +59,8 @@ def test_amplitude_scales_the_trough_and_zero_stops_it() -> None:
 
 
 def test_a_piece_rides_from_the_time_it_left_the_cone() -> None:
-    p = WeigherParams(heads=2, max_heads=2, transport_time=1.0, load_cell_noise=0.0)
-    w = Weigher(p)
+    p = WeigherParams(max_heads=2, transport_time=1.0, load_cell_noise=0.0)
+    w = Weigher(p, heads=2)
     w.receive([1, 1], [0.2, 0.1], times=[0.3, 0.1])  # the later one goes on second
     w.advance(1.099)
     assert w.pool.sum() + w.gate.sum() == 0.0
@@ -74,8 +74,8 @@ def test_a_piece_rides_from_the_time_it_left_the_cone() -> None:
 
 
 def test_order_is_kept_on_a_trough() -> None:
-    p = WeigherParams(heads=1, max_heads=1, transport_time=1.0, load_cell_noise=0.0)
-    w = Weigher(p)
+    p = WeigherParams(max_heads=1, transport_time=1.0, load_cell_noise=0.0)
+    w = Weigher(p, heads=1)
     w.receive([1], [0.1])
     w.advance(0.5)
     w.receive([1], [0.2])
@@ -100,6 +100,12 @@ def test_every_kilogram_is_somewhere_over_a_long_run() -> None:
     assert b['packed'] == pytest.approx(sum(pk.mass for pk in w.packs), rel=1e-12)
     s = w.stats()
     assert s.packs > 100 and s.cycles == 600
+    give = np.array([pk.giveaway for pk in w.packs])  # the running statistics, recomputed
+    assert s.giveaway_mean == pytest.approx(give.mean(), rel=1e-9)
+    assert s.giveaway_std == pytest.approx(give.std(ddof=1), rel=1e-9)
+    assert s.under_target == np.mean(give < 0.0)
+    assert s.below_tne == np.mean(give < -0.015)
+    assert s.packs_per_minute == pytest.approx(s.packs / 10.0)
     assert all(pk.mass >= 0.5 - 0.01 for pk in w.packs)  # noise can cheat the target a little
 
 
@@ -130,14 +136,14 @@ def test_giveaway_matches_enumeration_for_independent_hoppers() -> None:
         best = min((x for x in totals if x >= target), default=None)
         key = round(best - target, 9) if best is not None else None
         expected[key] = expected.get(key, 0.0) + 1.0 / 3 ** heads
-    p = WeigherParams(heads=heads, max_heads=heads, target=target, load_cell_noise=0.0,
+    p = WeigherParams(max_heads=heads, target=target, load_cell_noise=0.0,
                       transport_time=0.01, gate_time=0.0, settle_time=0.0,
                       cycles_per_minute=60.0)
     rng = np.random.default_rng(0)
     counts: dict[float, int] = {}
     cycles = 20_000
     for _ in range(cycles):  # a fresh machine each time: independent fillings
-        w = Weigher(p)
+        w = Weigher(p, heads=heads)
         w.receive(range(1, heads + 1), rng.choice(values, heads))
         packs = w.advance(1.0)  # the first cycle
         key = round(packs[0].giveaway, 9) if packs else None
@@ -149,7 +155,7 @@ def test_giveaway_matches_enumeration_for_independent_hoppers() -> None:
 
 
 @pytest.mark.parametrize('key, value, match', [
-    ('heads', 0, 'weigher.heads'), ('heads', 2.5, 'weigher.heads'),
+    ('min_heads', 0, 'weigher.min_heads'), ('min_heads', 2.5, 'weigher.min_heads'),
     ('target', 0.0, 'weigher.target'), ('target', math.nan, 'weigher.target'),
     ('cycles_per_minute', -1.0, 'weigher.cycles_per_minute'),
     ('transport_time', math.inf, 'weigher.transport_time'),
@@ -164,7 +170,9 @@ def test_bad_configuration_is_refused_naming_the_key(key: str, value, match: str
 
 def test_defaults_and_bad_input() -> None:
     p = weigher_params_from_mapping({})
-    assert p == WeigherParams() and p.heads == 14 and p.cycle == 1.0
+    assert p == WeigherParams() and p.cycle == 1.0
+    with pytest.raises(ParameterError, match='heads'):
+        Weigher(p, heads=0)
     with pytest.raises(ParameterError, match='min_heads'):
         WeigherParams(min_heads=5, max_heads=3)
     w = Weigher(p)
