@@ -49,6 +49,7 @@ from .formats.packs_csv import write_packs_csv
 from .formats.runlog import ScenarioRecorder
 from .formats.scenario_file import load_scenario
 from .physics.simulation import Simulator, StepResult, warm_up
+from .weigher.machine import Weigher
 
 
 class ProgressBar:
@@ -200,8 +201,10 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
         check_writable(args.packs, 'the packs')
     bar = None if args.quiet else ProgressBar(scenario.duration, err)
     with StopOnSignals() as stop, contextlib.ExitStack() as outputs:
-        recorder = outputs.enter_context(contextlib.closing(
-            ScenarioRecorder(args.mcap, scenario, args.scenario))) if args.mcap else None
+        weigher = (Weigher(scenario.weigher, scenario.model.channels.count)
+                   if scenario.weigher is not None else None)
+        recorder = outputs.enter_context(contextlib.closing(ScenarioRecorder(
+            args.mcap, scenario, args.scenario, weigher=weigher))) if args.mcap else None
         events = outputs.enter_context(EventsCsvWriter(args.events))
         callbacks = [c for c in (recorder, bar) if c is not None]
 
@@ -211,7 +214,7 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
                 callback(t, sim, step)
 
         try:
-            result = run_scenario(scenario, progress, stop=stop)
+            result = run_scenario(scenario, progress, stop=stop, weigher=weigher)
         finally:
             if bar is not None:
                 bar.end()

@@ -72,7 +72,9 @@ def test_packs_csv_of_a_scenario_with_a_weigher(tmp_path: Path,
     scenario.write_text(SCENARIO.replace('duration: 3.0', 'duration: 8.0') + (
         'weigher: {target: 0.1, transport_time: 1.0, load_cell_noise: 0.0}\n'))
     events, packs = tmp_path / 'events.csv', tmp_path / 'packs.csv'
-    assert main(['run', str(scenario), '--events', str(events), '--packs', str(packs)]) == 0
+    mcap = tmp_path / 'run.mcap'
+    assert main(['run', str(scenario), '--events', str(events), '--packs', str(packs),
+                 '--mcap', str(mcap)]) == 0
     with events.open() as stream:
         exits = list(csv.DictReader(stream))
     with packs.open() as stream:
@@ -88,6 +90,13 @@ def test_packs_csv_of_a_scenario_with_a_weigher(tmp_path: Path,
         exit_t = min(float(e['t']) for e in exits if e['channel'] == row['heads'])
         assert float(row['t']) >= exit_t + 1.0 + 0.3 + 0.4  # transport, gate, settle
     assert '2 packs written' in capsys.readouterr().err
+    # the recording carries the weigher, and the report draws it
+    from cone_feeder_sim.report.draw import write_report
+    run = write_report(mcap, tmp_path / 'report.png')
+    assert run.packs is not None and len(run.packs.t) == 2
+    np.testing.assert_array_equal(run.packs.mass, [float(r['mass']) for r in rows])
+    assert run.hoppers.weight.shape[1] == 14 and run.hoppers.t[-1] == pytest.approx(8.0)
+    assert run.metadata['weigher.enabled'] == 'true' and run.contact() == 'off'
     # without a weigher: section, --packs is refused before anything runs
     scenario.write_text(SCENARIO)
     assert main(['run', str(scenario), '--events', str(events), '--packs', str(packs)]) == 2

@@ -39,8 +39,8 @@ class RunResult:
 
     end_time (s) is the simulation time the run reached; stopped is True when the stop
     predicate ended it before the scenario's end. With a weigher in the scenario, packs
-    are the packs it made (it runs to the scenario's duration, also after the last piece
-    left the cone) and weigher is the machine at the end (its balance and statistics).
+    are the packs it made (the run goes on to the scenario's duration, also after the last
+    piece left the cone) and weigher is the machine at the end (balance, statistics).
     """
 
     exits: list[ExitEvents] = field(default_factory=list)
@@ -69,25 +69,30 @@ Progress = Callable[[float, Simulator, StepResult], None]
 
 
 def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
-                 stop: Callable[[], bool] | None = None) -> RunResult:
+                 stop: Callable[[], bool] | None = None,
+                 weigher: Weigher | None = None) -> RunResult:
     """
-    Run a validated scenario to its end (or until every piece has left, or stop() says so).
+    Run a validated scenario to its end (or until every piece has left and there is no
+    weigher to run on, or stop() says so).
 
     Particle ids are the 0-based indices of the pieces in the scenario. progress, if given,
     is called after every output interval with the simulated time at its end, the simulator
     and the interval's StepResult (its exits and failures). stop, if given, is asked before
     every interval; when it returns True the run ends there (result.stopped), so an
-    interval is never cut short.
+    interval is never cut short. weigher: the machine to drive when the scenario has one
+    (default: a new one), so that a progress callback can record it as it goes.
     """
     sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
     for spec in scenario.particles:
         sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
                 [spec.product])
     result = RunResult()
-    weigher = (Weigher(scenario.weigher, scenario.model.channels.count)
-               if scenario.weigher is not None else None)
+    if scenario.weigher is None:
+        weigher = None
+    elif weigher is None:
+        weigher = Weigher(scenario.weigher, scenario.model.channels.count)
     k = 0
-    while sim.t < scenario.duration and sim.state.count:
+    while sim.t < scenario.duration and (sim.state.count or weigher is not None):
         if stop is not None and stop():
             result.stopped = True
             break
@@ -106,8 +111,5 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
             progress(t1, sim, step)
     result.remaining_ids = sim.state.ids.copy()
     result.end_time = sim.t
-    if weigher is not None and not result.stopped:  # the machine runs to the end
-        result.packs.extend(weigher.advance(scenario.duration))
-    if weigher is not None:
-        result.weigher = weigher
+    result.weigher = weigher
     return result

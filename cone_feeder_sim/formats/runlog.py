@@ -46,8 +46,8 @@ import numpy as np
 
 from .mcap_writer import McapRecorder
 from .messages import (
-    channel_mass_message, cone_state_message, exits_message, header, MarkerBuilder, MarkerSchedule,
-    particles_message, stamp_ns, states_message)
+    channel_mass_message, cone_state_message, exits_message, header, hopper_weights_message,
+    MarkerBuilder, MarkerSchedule, packs_message, particles_message, stamp_ns, states_message)
 from .run_recorder import END_METADATA_NAME, make_parent_dir
 from .topics import RUNNER_TOPICS, TOPICS
 from .. import __version__
@@ -60,6 +60,7 @@ from ..physics.params import (
     CHANNEL_KEYS, INTERACTION_KEYS, MODEL_KEYS, ModelParams, P_M, PRODUCT_LIMITS,
     ProductParams, SolverParams)
 from ..physics.simulation import Failure, Simulator, StepResult
+from ..weigher.machine import Weigher
 
 __all__ = [
     'DEFAULT_RECORD_PATH',
@@ -263,6 +264,10 @@ def scenario_metadata(scenario: Scenario, source: str, topics: Mapping[str, str]
     values: dict[str, Any] = dict(model_parameter_values(scenario.model))
     values.update(solver_parameter_values(scenario.solver))
     values.update(interaction_values(scenario.model))
+    values['weigher.enabled'] = scenario.weigher is not None
+    if scenario.weigher is not None:
+        values.update({f'weigher.{f.name}': getattr(scenario.weigher, f.name)
+                       for f in dataclasses.fields(scenario.weigher)})
     values.update({'frame_id': frame_id, 'markers.rate': markers_rate,
                    'duration': scenario.duration, 'output_interval': scenario.output_interval})
     data = {name: parameter_text(value) for name, value in values.items()}
@@ -290,13 +295,19 @@ class ScenarioRecorder:
     Use it as the runner's progress callback. Topics (absolute, as a node in the root
     namespace publishes them): particles, particle_states, exit_events (intervals with
     exits only), channel_mass (cumulative), cone_state and markers (``markers_rate`` per
-    simulated second); log time and stamps = simulation time at the end of the interval.
+    simulated second); with ``weigher`` (the machine the runner drives), hopper_weights and
+    pack_events (intervals with packs only) too. Log time and stamps = simulation time at
+    the end of the interval.
     """
 
     def __init__(self, path: str | os.PathLike, scenario: Scenario, source: str = '', *,
-                 frame_id: str = 'feeder', markers_rate: float = 10.0) -> None:
+                 frame_id: str = 'feeder', markers_rate: float = 10.0,
+                 weigher: Weigher | None = None) -> None:
         """Create the file and write schemas, channels and the metadata."""
-        self._names = {name: '/' + name for name in RUNNER_TOPICS}
+        names = RUNNER_TOPICS + (('hopper_weights', 'pack_events') if weigher else ())
+        self._names = {name: '/' + name for name in names}
+        self._weigher = weigher
+        self._packs_written = 0
         path = Path(path)
         make_parent_dir(path)
         self._recorder = McapRecorder(path)
@@ -343,6 +354,13 @@ class ScenarioRecorder:
         self._write('cone_state', cone_state_message(head, state.angle, sim.omega()), t_ns)
         if self._schedule.due(t):
             self._write('markers', self._markers.message(head, state.angle, q), t_ns)
+        if self._weigher is not None:
+            self._write('hopper_weights', hopper_weights_message(
+                self._weigher.hopper_readings()), t_ns)
+            packs = self._weigher.packs[self._packs_written:]
+            if packs:
+                self._write('pack_events', packs_message(head, tuple(packs)), t_ns)
+                self._packs_written += len(packs)
         self._intervals += 1
         self._t = t
 

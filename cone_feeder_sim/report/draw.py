@@ -220,6 +220,42 @@ def draw_pieces(ax: Any, run: RunData) -> None:
     ax.grid(True, linewidth=0.3, alpha=0.5)
 
 
+def draw_hoppers(ax: Any, run: RunData) -> None:
+    """Draw the weigh hoppers' readings over time, one row per head (a heat map)."""
+    series = run.hoppers
+    heads = series.weight.shape[1]
+    t0, t1 = float(series.t[0]), float(series.t[-1])
+    image = ax.imshow(series.weight.T, aspect='auto', origin='lower', interpolation='nearest',
+                      extent=(t0, t1 if t1 > t0 else t0 + 1.0, 0.5, heads + 0.5),
+                      cmap='YlOrBr')
+    colorbar = ax.figure.colorbar(image, ax=ax, fraction=0.05, pad=0.02)
+    colorbar.set_label('kg')
+    ax.set_xlabel('simulation time (s)')
+    ax.set_ylabel('head')
+    ax.set_title('Weigh hoppers over time (0: empty or not weighed yet)', fontsize=10)
+
+
+def draw_giveaway(ax: Any, run: RunData) -> None:
+    """Draw the histogram of the packs' giveaway (g), with the target and -TNE marked."""
+    packs = run.packs
+    grams = 1e3 * packs.giveaway
+    ax.hist(grams, bins=min(40, max(5, len(grams) // 4)), color='tab:green', alpha=0.8)
+    ax.axvline(0.0, color='black', linewidth=1.0)
+    tne = run.metadata.get('weigher.tolerable_negative_error')
+    try:
+        ax.axvline(-1e3 * float(tne), color='tab:red', linestyle='--', linewidth=1.0,
+                   label='target - TNE')
+        ax.legend(fontsize=8, frameon=False)
+    except (TypeError, ValueError):
+        pass
+    span = float(packs.t[-1] - packs.t[0]) if len(packs.t) > 1 else 0.0
+    rate = f', {60.0 * (len(grams) - 1) / span:.1f}/min' if span > 0 else ''
+    ax.set_title(f'Giveaway: {len(grams)} packs{rate}, {grams.mean():.1f} ± '
+                 f'{grams.std():.1f} g', fontsize=10)
+    ax.set_xlabel('pack mass - target (g)')
+    ax.set_ylabel('packs')
+
+
 def _summary_line(run: RunData) -> str:
     span = run.time_span()
     parts = [f'{run.message_count} messages']
@@ -245,14 +281,19 @@ def build_figure(run: RunData, *, dpi: float = 100.0) -> Figure:
         notes.append(f'... and {len(run.notes) - 6} more notes')
     bottom = 0.065 + 0.018 * len(notes)
     left = figure.add_gridspec(1, 1, left=0.04, right=0.47, top=0.89, bottom=bottom + 0.07)
-    right = figure.add_gridspec(3, 1, left=0.55, right=0.95, top=0.89, bottom=bottom,
-                                hspace=0.42)
+    weigher = run.packs is not None and run.hoppers is not None and len(run.hoppers.t) > 1
+    right = figure.add_gridspec(4 if weigher else 3, 2 if weigher else 1, left=0.55,
+                                right=0.95, top=0.89, bottom=bottom, hspace=0.55,
+                                wspace=0.35)
     draw_top_view(figure.add_subplot(left[0, 0]), run)
-    draw_exits(figure.add_subplot(right[0, 0]), run)
-    omega_ax = figure.add_subplot(right[1, 0])
-    pieces_ax = figure.add_subplot(right[2, 0], sharex=omega_ax)
+    draw_exits(figure.add_subplot(right[0, :]), run)
+    omega_ax = figure.add_subplot(right[1, :])
+    pieces_ax = figure.add_subplot(right[2, :], sharex=omega_ax)
     draw_omega(omega_ax, run)
     draw_pieces(pieces_ax, run)
+    if weigher:
+        draw_hoppers(figure.add_subplot(right[3, 0]), run)
+        draw_giveaway(figure.add_subplot(right[3, 1]), run)
     omega_ax.tick_params(labelbottom=True)
     figure.suptitle(f'Cone feeder run: {run.path.name}', fontsize=15, fontweight='bold',
                     y=0.985)

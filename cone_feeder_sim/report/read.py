@@ -60,6 +60,8 @@ __all__ = [
     'DEFAULT_MAX_TRAJECTORIES',
     'DEFAULT_MAX_TRAJECTORY_POINTS',
     'ChannelTotals',
+    'HopperSeries',
+    'Packs',
     'ReportError',
     'RunData',
     'TimeSeries',
@@ -82,7 +84,10 @@ DEFAULT_MAX_TRAJECTORY_POINTS = 400_000
 
 #: Topic roles: last part of the topic name -> message type.
 TOPIC_TYPES = {role: TOPICS[role].type_name
-               for role in ('particle_states', 'exit_events', 'cone_state', 'channel_mass')}
+               for role in ('particle_states', 'exit_events', 'cone_state', 'channel_mass',
+                            'pack_events', 'hopper_weights')}
+#: Roles a run has only with the weigher (no note when they are missing).
+WEIGHER_ROLES = ('pack_events', 'hopper_weights')
 
 
 # --------------------------------------------------------------------------- data
@@ -98,6 +103,23 @@ class TimeSeries:
     def __len__(self) -> int:
         """Return the number of samples."""
         return int(self.t.shape[0])
+
+
+@dataclasses.dataclass(frozen=True)
+class Packs:
+    """The weigher's packs: discharge time ``t`` (s), ``mass`` and ``giveaway`` (kg), (P,)."""
+
+    t: np.ndarray
+    mass: np.ndarray
+    giveaway: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class HopperSeries:
+    """Weigh hopper readings over time: ``t`` (K,) s and ``weight`` (K, heads) kg."""
+
+    t: np.ndarray
+    weight: np.ndarray
 
 
 @dataclasses.dataclass(frozen=True)
@@ -152,7 +174,8 @@ class RunData:
     ``layout`` and ``cone_radius`` (m) come from the metadata when
     ``layout_from_metadata`` is true, else from :class:`ModelParams` defaults.
     ``last_frame`` is the time (s) and the (n, 2) positions (m) of the last
-    ``particle_states`` message, or None.
+    ``particle_states`` message, or None. ``packs`` and ``hoppers`` are the weigher's
+    ``pack_events`` and ``hopper_weights`` (None in a run without the weigher).
     ``omega`` is the cone's angular velocity (rad/s) per ``cone_state``
     message; ``pieces`` the number of points per ``particle_states`` message;
     ``channel_mass`` the data of the last ``channel_mass`` message (kg, index 0
@@ -178,6 +201,8 @@ class RunData:
     truncated: str | None
     notes: tuple[str, ...]
     last_frame: tuple[float, np.ndarray] | None = None
+    packs: 'Packs | None' = None
+    hoppers: 'HopperSeries | None' = None
 
     def piece_radius(self) -> float:
         """Return the pieces' outer radius s0 (m): the metadata's, else the default."""
@@ -384,6 +409,9 @@ class _RunReader:
         self.pieces_t: list[float] = []
         self.pieces_n: list[int] = []
         self.last_frame: tuple[float, np.ndarray] | None = None
+        self.pack_parts: list[np.ndarray] = []
+        self.hopper_t: list[float] = []
+        self.hopper_rows: list[np.ndarray] = []
         self.omega_t: list[float] = []
         self.omega: list[float] = []
         self.exit_parts: list[tuple[float, np.ndarray]] = []
@@ -435,6 +463,13 @@ class _RunReader:
                 self._exit_events(t, message)
             elif role == 'cone_state':
                 self._cone_state(t, message)
+            elif role == 'pack_events':
+                points = cloud_points(message)
+                _require(points, ('t', 'mass', 'giveaway'), 'pack_events')
+                self.pack_parts.append(points)
+            elif role == 'hopper_weights':
+                self.hopper_t.append(t)
+                self.hopper_rows.append(np.asarray(message['data'], dtype=np.float64).copy())
             else:
                 self.channel_mass = np.asarray(message['data'], dtype=np.float64).copy()
                 self.channel_mass_time = t
@@ -569,7 +604,7 @@ def _finish(path: pathlib.Path, reader: _RunReader, truncated: str | None) -> Ru
     for role, topics in sorted(reader.ignored_topics.items()):
         notes.append(f'{role}: using {reader.topics[role]}, ignoring {", ".join(sorted(topics))}')
     for role in TOPIC_TYPES:
-        if role not in reader.topics:
+        if role not in reader.topics and role not in WEIGHER_ROLES:
             notes.append(f'no {role} topic ({TOPIC_TYPES[role]}) in the file')
     trajectories = reader.trajectories.result()
     exits, exit_log_time = reader.exits(layout)
@@ -588,7 +623,23 @@ def _finish(path: pathlib.Path, reader: _RunReader, truncated: str | None) -> Ru
         pieces=_series(reader.pieces_t, reader.pieces_n, np.int64),
         channel_mass=reader.channel_mass, channel_mass_time=reader.channel_mass_time,
         topics=dict(reader.topics), message_count=reader.message_count, truncated=truncated,
-        notes=tuple(notes), last_frame=reader.last_frame)
+        notes=tuple(notes), last_frame=reader.last_frame, packs=_packs(reader),
+        hoppers=_hoppers(reader))
+
+
+def _packs(reader: '_RunReader') -> Packs | None:
+    if not reader.pack_parts:
+        return None
+    points = np.concatenate(reader.pack_parts)
+    return Packs(t=points['t'].astype(np.float64), mass=points['mass'].astype(np.float64),
+                 giveaway=points['giveaway'].astype(np.float64))
+
+
+def _hoppers(reader: '_RunReader') -> HopperSeries | None:
+    rows = reader.hopper_rows
+    if not rows or any(row.shape != rows[0].shape for row in rows):
+        return None
+    return HopperSeries(t=np.array(reader.hopper_t), weight=np.vstack(rows))
 
 
 def exits_per_channel(exits: ExitEvents, channel_count: int) -> ChannelTotals:
