@@ -72,8 +72,9 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
                  stop: Callable[[], bool] | None = None,
                  weigher: Weigher | None = None) -> RunResult:
     """
-    Run a validated scenario to its end (or until every piece has left and there is no
-    weigher to run on, or stop() says so).
+    Run a validated scenario to its end, or until stop() says so.
+
+    Without a weigher the run also ends when every piece has left the cone.
 
     Particle ids are the 0-based indices of the pieces in the scenario. progress, if given,
     is called after every output interval with the simulated time at its end, the simulator
