@@ -45,6 +45,16 @@ def _cell_hash(ix, iy, iz, mask):
 
 
 @jit
+def _within(x, reach, p, q):
+    """Tell whether pieces p and q are closer than the sum of their reaches."""
+    d0 = x[p, 0] - x[q, 0]
+    d1 = x[p, 1] - x[q, 1]
+    d2 = x[p, 2] - x[q, 2]
+    r = reach[p] + reach[q]
+    return d0 * d0 + d1 * d1 + d2 * d2 < r * r
+
+
+@jit
 def _append(found, total, p, q):
     if total == found.shape[0]:
         grown = np.empty((2 * total, 2), dtype=np.int64)
@@ -101,11 +111,7 @@ def _contact_pairs(x, reach, cell):
                         if (q <= p or reach[q] > half or ix[q] != cx or iy[q] != cy
                                 or iz[q] != cz):
                             continue
-                        d0 = x[p, 0] - x[q, 0]
-                        d1 = x[p, 1] - x[q, 1]
-                        d2 = x[p, 2] - x[q, 2]
-                        r = reach[p] + reach[q]
-                        if d0 * d0 + d1 * d1 + d2 * d2 < r * r:
+                        if _within(x, reach, p, q):
                             found, total = _append(found, total, p, q)
     for a in range(n_big):  # a large reach scans as many cells as it needs
         p = big[a]
@@ -119,20 +125,11 @@ def _contact_pairs(x, reach, cell):
                         q = members[k]
                         if reach[q] > half or ix[q] != cx or iy[q] != cy or iz[q] != cz:
                             continue
-                        d0 = x[p, 0] - x[q, 0]
-                        d1 = x[p, 1] - x[q, 1]
-                        d2 = x[p, 2] - x[q, 2]
-                        r = reach[p] + reach[q]
-                        if d0 * d0 + d1 * d1 + d2 * d2 < r * r:
+                        if _within(x, reach, p, q):
                             found, total = _append(found, total, p, q)
         for c in range(a + 1, n_big):  # large with large: all pairs
-            q = big[c]
-            d0 = x[p, 0] - x[q, 0]
-            d1 = x[p, 1] - x[q, 1]
-            d2 = x[p, 2] - x[q, 2]
-            r = reach[p] + reach[q]
-            if d0 * d0 + d1 * d1 + d2 * d2 < r * r:
-                found, total = _append(found, total, p, q)
+            if _within(x, reach, p, big[c]):
+                found, total = _append(found, total, p, big[c])
     pairs = found[:total]
     order = np.argsort(pairs[:, 0] * count + pairs[:, 1])
     out = np.empty((total, 2), dtype=np.int64)

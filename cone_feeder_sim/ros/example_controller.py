@@ -36,6 +36,10 @@ A direction without data, or not used for ``explore_after`` periods, is tried ne
 both histograms stay current. Each decision is logged with the imbalance
 (max - min) / mean of the channel masses.
 
+With ``objective: hoppers`` the masses evened out are the weigh hoppers' readings
+(``hopper_weights`` of the weigher below the cone) instead of the cumulative channel
+masses: the controller turns the cone to keep the weigh hoppers fed evenly.
+
 Its authority depends on the feed: where product is dropped evenly around the cone, both
 directions spread it about evenly and the controller mainly corrects random imbalance;
 where product arrives on one side, the direction moves it to different channels.
@@ -55,11 +59,12 @@ from std_msgs.msg import Float64, Float64MultiArray
 
 from .parameters import declare, init_or_exit, ParamSpec, warn_unknown_parameters
 from .qos import rclpy_qos
+from ..errors import ParameterError
 from ..formats.pointcloud import cloud_points
 from ..formats.topics import TOPICS
 from ..physics.params import Limit
 
-__all__ = ['ExampleController', 'choose_direction', 'main']
+__all__ = ['DirectionLearner', 'ExampleController', 'choose_direction', 'main']
 
 #: The controller's parameters.
 PARAMETERS = (
@@ -72,7 +77,13 @@ PARAMETERS = (
               'histograms', limit=Limit(0.0, 1.0, '')),
     ParamSpec('explore_after', 3, 'periods after which an unused direction is tried',
               limit=Limit(1, 1000, '')),
+    ParamSpec('objective', 'channel_mass', 'what the controller evens out: channel_mass '
+              "(the cumulative mass per channel) or hoppers (the weigher's weigh hoppers, "
+              'from hopper_weights)', constraints='channel_mass or hoppers'),
 )
+
+#: Values of the ``objective`` parameter: the topic whose values are evened out.
+OBJECTIVES = {'channel_mass': 'channel_mass', 'hoppers': 'hopper_weights'}
 
 
 def choose_direction(histograms: dict[int, np.ndarray], masses: np.ndarray,
@@ -95,6 +106,52 @@ def choose_direction(histograms: dict[int, np.ndarray], masses: np.ndarray,
     return 1 if scores[1] > scores[-1] else -1
 
 
+class DirectionLearner:
+    """
+    The controller's state without ROS: learned exit histograms and the commanded direction.
+
+    ``add_exits`` during a period, ``decide`` at its end (see the module documentation);
+    the node feeds it from its subscriptions, and a headless evaluation from the engine.
+    """
+
+    def __init__(self, learning_rate: float, explore_after: int, direction: int = -1) -> None:
+        """Start with no data, turning in ``direction`` (+1 or -1)."""
+        self.learning_rate = learning_rate
+        self.explore_after = explore_after
+        self.direction = direction
+        self.histograms: dict[int, np.ndarray] = {1: np.zeros(0), -1: np.zeros(0)}
+        self.current = np.zeros(0)
+        self.unused = {1: 0, -1: 0}
+
+    def _resize(self, count: int) -> None:
+        """Grow the histograms to ``count`` channels, keeping what was learned."""
+        if self.current.size < count:
+            grow = count - self.current.size
+            self.current = np.pad(self.current, (0, grow))
+            self.histograms = {d: np.pad(h, (0, grow)) for d, h in self.histograms.items()}
+
+    def add_exits(self, channels: np.ndarray, masses: np.ndarray) -> None:
+        """Add exits (channels 1-based, masses kg) to this period's histogram."""
+        channels = np.asarray(channels, dtype=int)
+        if channels.size:
+            self._resize(int(channels.max()))
+            np.add.at(self.current, channels - 1, masses)
+
+    def decide(self, masses: np.ndarray) -> int:
+        """Learn from the period that ended and return the next direction."""
+        self._resize(masses.size)
+        if self.current.size:
+            learned = self.histograms[self.direction]
+            self.histograms[self.direction] = ((1.0 - self.learning_rate) * learned
+                                               + self.learning_rate * self.current)
+            self.current = np.zeros_like(self.current)
+        self.unused[self.direction] = 0
+        self.unused[-self.direction] += 1
+        self.direction = choose_direction(self.histograms, masses, self.unused,
+                                          self.explore_after, self.direction)
+        return self.direction
+
+
 class ExampleController(Node):
     """Choose the cone's direction from the channel deficits; see the module documentation."""
 
@@ -106,40 +163,36 @@ class ExampleController(Node):
         self.speed = values['speed']
         self.period = values['period']
         rate = values['command_rate']
-        self.learning_rate = values['learning_rate']
-        self.explore_after = values['explore_after']
-        self.direction = -1
+        if values['objective'] not in OBJECTIVES:
+            raise ParameterError(f"parameter 'objective' must be one of "
+                                 f"{', '.join(OBJECTIVES)}, got {values['objective']!r}")
+        self.learner = DirectionLearner(values['learning_rate'], values['explore_after'])
         self.masses = np.zeros(0)
-        self.histograms: dict[int, np.ndarray] = {1: np.zeros(0), -1: np.zeros(0)}
-        self.current = np.zeros(0)
-        self.unused = {1: 0, -1: 0}
         self.exits = 0
         self.pub = self.create_publisher(Float64, 'rotation_cmd',
                                          rclpy_qos(TOPICS['rotation_cmd'].qos))
         self.create_subscription(PointCloud2, 'exit_events', self.on_exits,
                                  rclpy_qos(TOPICS['exit_events'].qos))
-        self.create_subscription(Float64MultiArray, 'channel_mass', self.on_channel_mass,
-                                 rclpy_qos(TOPICS['channel_mass'].qos))
+        topic = OBJECTIVES[values['objective']]
+        self.create_subscription(Float64MultiArray, topic, self.on_channel_mass,
+                                 rclpy_qos(TOPICS[topic].qos))
         self.create_timer(1.0 / rate, self.send)
         self.create_timer(self.period, self.decide)
         self.send()
 
-    def _resize(self, count: int) -> None:
-        if self.current.size != count:
-            self.current = np.zeros(count)
-            self.histograms = {1: np.zeros(count), -1: np.zeros(count)}
+    @property
+    def direction(self) -> int:
+        """Return the commanded direction: +1 counter-clockwise, -1 clockwise."""
+        return self.learner.direction
 
     def on_channel_mass(self, msg: Float64MultiArray) -> None:
-        """Keep the cumulative masses (index 0 = channel 1)."""
+        """Keep the masses to even out (index 0 = channel 1): cumulative, or in hoppers."""
         self.masses = np.array(msg.data, dtype=float)
-        self._resize(self.masses.size)
 
     def on_exits(self, msg: PointCloud2) -> None:
         """Add the exits to this period's histogram of the commanded direction."""
         rows = cloud_points(msg)
-        count = int(rows['channel'].max()) if rows.size else 0
-        self._resize(max(self.current.size, count))
-        np.add.at(self.current, rows['channel'].astype(int) - 1, rows['mass'])
+        self.learner.add_exits(rows['channel'], rows['mass'])
         self.exits += rows.size
 
     def send(self) -> None:
@@ -148,22 +201,13 @@ class ExampleController(Node):
 
     def decide(self) -> None:
         """Learn from the last period and choose the next direction."""
-        if self.current.size:
-            learned = self.histograms[self.direction]
-            self.histograms[self.direction] = ((1.0 - self.learning_rate) * learned
-                                               + self.learning_rate * self.current)
-            self.current = np.zeros_like(self.current)
-        self.unused[self.direction] = 0
-        self.unused[-self.direction] += 1
-        new = choose_direction(self.histograms, self.masses, self.unused,
-                               self.explore_after, self.direction)
+        new = self.learner.decide(self.masses)
         imbalance = 0.0
         if self.masses.size and self.masses.mean() > 0.0:
             imbalance = float((self.masses.max() - self.masses.min()) / self.masses.mean())
         self.get_logger().info(
             f'{self.exits} exits, {self.masses.sum():.3f} kg, imbalance {imbalance:.2f}; '
             f'next: {"counter-clockwise" if new > 0 else "clockwise"}')
-        self.direction = new
         self.send()
 
 
@@ -172,11 +216,15 @@ def main(args: list[str] | None = None) -> int:
     if not init_or_exit(args, 'example_controller'):
         return 1
     node = None
+    status = 0
     try:
         node = ExampleController()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except ParameterError as exc:
+        rclpy.logging.get_logger('example_controller').fatal(f'cannot start: {exc}')
+        status = 1
     except Exception:  # noqa: B902 - only to tell a shutdown race from a real error
         if rclpy.ok():
             raise
@@ -184,7 +232,7 @@ def main(args: list[str] | None = None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return status
 
 
 if __name__ == '__main__':

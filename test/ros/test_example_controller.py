@@ -18,9 +18,11 @@ from collections.abc import Iterator
 import random
 import time
 
+from cone_feeder_sim.errors import ParameterError
 from cone_feeder_sim.formats.cdr import encode
 from cone_feeder_sim.formats.pointcloud import cloud_points, EXIT_DTYPE, point_fields
-from cone_feeder_sim.ros.example_controller import choose_direction, ExampleController
+from cone_feeder_sim.ros.example_controller import (
+    choose_direction, DirectionLearner, ExampleController)
 from cone_feeder_sim.ros.sim_node import SimNode
 import numpy as np
 import pytest
@@ -67,6 +69,21 @@ def test_choose_direction_explores_then_fills_the_deficit() -> None:
     assert choose_direction(learned, np.ones(4), unused, 3, CW) == CCW
 
 
+def test_the_learner_learns_where_each_direction_sends_product() -> None:
+    # clockwise rotation sends product to channels 1-2, counter-clockwise to 3-4
+    learner = DirectionLearner(learning_rate=0.5, explore_after=3, direction=CW)
+    hoppers = np.array([0.5, 0.5, 0.0, 0.0])  # heads 3 and 4 are empty
+    for _ in range(2):  # one period each way (the other direction has no data yet)
+        feeds = [1, 2] if learner.direction == CW else [3, 4]
+        learner.add_exits(np.array(feeds), np.array([0.1, 0.1]))
+        learner.decide(hoppers)
+    assert learner.histograms[CW].tolist() == [0.05, 0.05, 0.0, 0.0]
+    assert learner.histograms[CCW].tolist() == [0.0, 0.0, 0.05, 0.05]
+    assert learner.direction == CCW  # it feeds the empty heads
+    learner.add_exits(np.array([3, 4]), np.array([0.1, 0.1]))
+    assert learner.decide(np.array([0.0, 0.0, 0.5, 0.5])) == CW
+
+
 @pytest.fixture
 def context() -> Iterator[Context]:
     ctx = Context()
@@ -75,6 +92,12 @@ def context() -> Iterator[Context]:
         yield ctx
     finally:
         ctx.try_shutdown()
+
+
+def test_an_unknown_objective_is_refused(context: Context) -> None:
+    with pytest.raises(ParameterError, match="'objective' must be one of channel_mass, hop"):
+        ExampleController(context=context, parameter_overrides=[
+            Parameter('objective', value='speed')])
 
 
 def test_controller_drives_the_simulator(context: Context) -> None:
