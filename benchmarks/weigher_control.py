@@ -23,8 +23,8 @@ The weigher under three ways of turning the cone, same feed, same seeds, 10 simu
 The controller is the node's own :class:`DirectionLearner`, fed from the engine as the
 node feeds it from its topics (a decision every ``period`` simulated seconds, 8 rad/s).
 Pieces alone (the engine's default model), the default weigher (config/weigher.yaml), feed
-``--rate`` pieces/s. Prints packs per minute, giveaway, under-target packs and starved
-heads per cycle; writes a figure::
+``--rate`` pieces/s with masses varying by ``--mass-std`` (relative). Prints packs per
+minute, giveaway, under-target packs and starved heads per cycle; writes a figure::
 
     .venv/bin/python benchmarks/weigher_control.py --out doc/figures/weigher_control.png
 """
@@ -41,12 +41,13 @@ PATTERN = ((2.0, -8.0), (2.0, 8.0))
 POLICIES = ('open loop', 'channel_mass', 'hoppers')
 
 
-def run(policy: str, minutes: float, rate: float, seed: int,
+def run(policy: str, minutes: float, rate: float, seed: int, mass_std: float,
         period: float = 2.0) -> tuple[FeederEngine, list]:
     """Run one policy; return the engine at the end and the packs."""
     drive = DriveParams(pattern=PATTERN) if policy == 'open loop' else DriveParams(
         cmd_timeout=0.0)
-    engine = FeederEngine(EngineConfig(drive=drive, feed=FeedParams(rate=rate), seed=seed,
+    feed = FeedParams(rate=rate, mass_rel_std=mass_std)
+    engine = FeederEngine(EngineConfig(drive=drive, feed=feed, seed=seed,
                                        weigher=WeigherParams(seed=seed)))
     learner = DirectionLearner(learning_rate=0.3, explore_after=3)
     every = int(round(period / engine.dt))
@@ -69,20 +70,24 @@ def main() -> None:
     parser.add_argument('--minutes', type=float, default=10.0)
     parser.add_argument('--rate', type=float, default=8.0, help='feed, pieces/s')
     parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--mass-std', type=float, default=0.3,
+                        help='relative standard deviation of the piece masses')
     parser.add_argument('--out', type=Path, default=None, help='PNG of the comparison')
     args = parser.parse_args()
-    print(f'# {args.minutes:g} simulated min, feed {args.rate:g} pieces/s, seed {args.seed}, '
-          'default weigher (1 kg packs, 60 cycles/min)')
+    print(f'# {args.minutes:g} simulated min, feed {args.rate:g} pieces/s (masses 0.125 kg '
+          f'+- {100 * args.mass_std:g} %), seed {args.seed}, default weigher (1 kg packs, '
+          '60 cycles/min)')
     print(f'{"policy":>13} {"packs/min":>10} {"giveaway g":>11} {"std g":>7} '
-          f'{"under %":>8} {"starved":>8} {"kg packed":>10}')
+          f'{"under %":>8} {"< TNE %":>8} {"starved":>8} {"kg packed":>10}')
     results = {}
     for policy in POLICIES:
-        engine, packs = run(policy, args.minutes, args.rate, args.seed)
+        engine, packs = run(policy, args.minutes, args.rate, args.seed, args.mass_std)
         stats = engine.weigher.stats()
         results[policy] = packs
         print(f'{policy:>13} {stats.packs_per_minute:>10.2f} '
               f'{1e3 * stats.giveaway_mean:>11.1f} {1e3 * stats.giveaway_std:>7.1f} '
-              f'{100 * stats.under_target:>8.2f} {stats.starved_per_cycle:>8.2f} '
+              f'{100 * stats.under_target:>8.2f} {100 * stats.below_tne:>8.2f} '
+              f'{stats.starved_per_cycle:>8.2f} '
               f'{engine.weigher.packed:>10.2f}', flush=True)
     if args.out is not None:
         draw(results, args)
@@ -96,7 +101,7 @@ def draw(results: dict[str, list], args: argparse.Namespace) -> None:
     figure = Figure(figsize=(11.0, 4.2), dpi=100)
     FigureCanvasAgg(figure)
     left, right = figure.subplots(1, 2)
-    bins = np.linspace(0.0, 400.0, 41)
+    bins = np.linspace(-10.0, 150.0, 33)  # 5-g bins; packs under the target on the left
     for policy, packs in results.items():
         t = np.array([p.t for p in packs])
         left.step(t / 60.0, np.arange(1, len(t) + 1), where='post', label=policy)

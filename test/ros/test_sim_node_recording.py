@@ -243,12 +243,12 @@ def test_resimulation_reproduces_the_recorded_run(tmp_path: Path) -> None:
 
     a, b = read_bag(original), read_bag(again)
     for topic in ('/particle_states', '/exit_events', '/channel_mass', '/cone_state',
-                  '/particles', '/markers'):
+                  '/particles', '/markers', '/hopper_weights', '/pack_events'):
         assert [t for t, _ in a[topic]] == [t for t, _ in b[topic]], topic
         for (_, ma), (_, mb) in zip(a[topic], b[topic]):
             assert plain(ma) == plain(mb), topic
     assert len(a['/exit_events']) > 0
-    assert len(a['/particle_states']) == ticks
+    assert len(a['/particle_states']) == ticks == len(a['/hopper_weights'])  # the weigher
     applied_a = [e for e in events(a, '/sim_node/events') if e['event'] in INPUT_EVENTS]
     applied_b = [e for e in events(b, '/sim_node/events') if e['event'] in INPUT_EVENTS]
     assert applied_a == applied_b
