@@ -73,6 +73,7 @@ from ..physics.simulation import (
 from ..weigher.machine import Pack, Weigher, WeigherParams, WeigherStats
 
 __all__ = [
+    'ChannelFeed',
     'DriveParams',
     'EngineConfig',
     'EngineInput',
@@ -323,7 +324,14 @@ class Reconfigure:
     feed: FeedParams | None = None
 
 
-EngineInput = RotationCommand | SpawnRequest | ResetRequest | Reconfigure
+@dataclass(frozen=True)
+class ChannelFeed:
+    """Set the weigher's dosing channels' feed amplitudes, (channels,) in [0, 2]; 0 stops."""
+
+    amplitude: tuple[float, ...]
+
+
+EngineInput = RotationCommand | SpawnRequest | ResetRequest | Reconfigure | ChannelFeed
 
 
 @dataclass(frozen=True)
@@ -554,6 +562,8 @@ class FeederEngine:
         elif isinstance(item, Reconfigure):
             if item.feed is not None:
                 check_feed_fits(self._config.model, item.feed)
+        elif isinstance(item, ChannelFeed):
+            item = self._checked_feed(item)
         elif not isinstance(item, ResetRequest):
             raise ParameterError(f'unknown engine input {item!r}')
         with self._pending_lock:
@@ -561,6 +571,21 @@ class FeederEngine:
                 raise InputError(f'{type(item).__name__} refused: {MAX_PENDING_INPUTS} inputs '
                                  'are already waiting for the next tick')
             self._pending.append(item)
+
+    def _checked_feed(self, item: ChannelFeed) -> ChannelFeed:
+        if self._config.weigher is None:
+            raise InputError('channel feed refused: the engine has no weigher (weigher off)')
+        count = self._config.model.channels.count
+        try:
+            values = tuple(float(v) for v in item.amplitude)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(f'channel feed amplitudes must be numbers: {exc}') from None
+        if len(values) != count:
+            raise ParameterError(f'channel feed needs {count} amplitudes (one per channel), '
+                                 f'got {len(values)}')
+        if not all(math.isfinite(v) and 0.0 <= v <= 2.0 for v in values):
+            raise ParameterError(f'channel feed amplitudes must be in [0, 2], got {values}')
+        return ChannelFeed(values)
 
     def _checked_spawn(self, item: SpawnRequest) -> SpawnRequest:
         positions = as_points('spawn position', item.positions, None)
@@ -627,6 +652,8 @@ class FeederEngine:
         elif isinstance(item, Reconfigure):
             self._drive = item.drive if item.drive is not None else self._drive
             self._feed = item.feed if item.feed is not None else self._feed
+        elif isinstance(item, ChannelFeed) and self._weigher is not None:
+            self._weigher.set_amplitude(item.amplitude)
         return np.zeros(0, dtype=np.int64)
 
     def _bounded(self, item: SpawnRequest) -> SpawnRequest | None:

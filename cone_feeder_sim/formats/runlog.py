@@ -53,8 +53,8 @@ from .topics import RUNNER_TOPICS, TOPICS
 from .. import __version__
 from ..errors import ConeFeederError
 from ..feeder.engine import (
-    DriveParams, EngineConfig, EngineInput, FeedParams, Reconfigure, ResetRequest, RotationCommand,
-    SpawnRequest)
+    ChannelFeed, DriveParams, EngineConfig, EngineInput, FeedParams, Reconfigure, ResetRequest,
+    RotationCommand, SpawnRequest)
 from ..feeder.scenario import Scenario
 from ..physics.params import (
     CHANNEL_KEYS, INTERACTION_KEYS, MODEL_KEYS, ModelParams, P_M, PRODUCT_LIMITS,
@@ -87,7 +87,7 @@ FORMAT_VERSION = '1'
 #: Default of the node's ``record_path``: strftime fields are filled in at the start.
 DEFAULT_RECORD_PATH = 'runs/sim_node_%Y%m%dT%H%M%S.mcap'
 #: Events that are engine inputs (re-simulation applies them again).
-INPUT_EVENTS = ('rotation', 'spawn', 'reset', 'reconfigure')
+INPUT_EVENTS = ('rotation', 'spawn', 'reset', 'reconfigure', 'channel_feed')
 
 
 # --------------------------------------------------------------------------- metadata
@@ -200,6 +200,8 @@ def input_event(tick: int, t: float, item: EngineInput) -> dict[str, Any]:
     elif isinstance(item, Reconfigure):
         event.update(event='reconfigure', drive=to_jsonable(item.drive),
                      feed=to_jsonable(item.feed))
+    elif isinstance(item, ChannelFeed):
+        event.update(event='channel_feed', amplitude=list(item.amplitude))
     else:
         raise ConeFeederError(f'unknown engine input {item!r}')
     return event
@@ -241,6 +243,8 @@ def engine_input_from_event(event: Mapping[str, Any]) -> EngineInput:
                 None if products is None else tuple(ProductParams(**p) for p in products))
         if kind == 'reset':
             return ResetRequest()
+        if kind == 'channel_feed':
+            return ChannelFeed(tuple(float(v) for v in event['amplitude']))
         if kind == 'reconfigure':
             drive = event.get('drive')
             feed = event.get('feed')

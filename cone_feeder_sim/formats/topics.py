@@ -205,6 +205,7 @@ TOPICS: Mapping[str, TopicSpec] = {spec.name: spec for spec in (
     TopicSpec('~/events', 'std_msgs/msg/String', 'out', EVENTS_QOS),
     TopicSpec('rotation_cmd', 'std_msgs/msg/Float64', 'in', COMMAND_QOS),
     TopicSpec('spawn', 'geometry_msgs/msg/PoseArray', 'in', COMMAND_QOS),
+    TopicSpec('channel_feed', 'std_msgs/msg/Float64MultiArray', 'in', COMMAND_QOS),
 )}
 
 #: The topics the headless runner writes (a scenario has no inputs and no wall clock).

@@ -135,7 +135,8 @@ from .qos import rclpy_qos
 from .resim import load_resim_plan, ResimPlan
 from .. import __version__
 from ..errors import ConeFeederError, ParameterError
-from ..feeder.engine import check_feed_fits, FeederEngine, MAX_PENDING_INPUTS, TickResult
+from ..feeder.engine import (
+    ChannelFeed, check_feed_fits, FeederEngine, MAX_PENDING_INPUTS, TickResult)
 from ..formats.cdr import CdrError, default_codec
 from ..formats.mcap_writer import COMPRESSIONS
 from ..formats.messages import (
@@ -288,7 +289,11 @@ class SimNode(GuardedNode):
             raw=True)
         self._sub_spawn = self.create_subscription(
             PoseArray, 'spawn', self._on_spawn, rclpy_qos(TOPICS['spawn'].qos), raw=True)
-        for sub, name in ((self._sub_cmd, 'rotation_cmd'), (self._sub_spawn, 'spawn')):
+        self._sub_feed = self.create_subscription(
+            Float64MultiArray, 'channel_feed', self._on_channel_feed,
+            rclpy_qos(TOPICS['channel_feed'].qos), raw=True)
+        for sub, name in ((self._sub_cmd, 'rotation_cmd'), (self._sub_spawn, 'spawn'),
+                          (self._sub_feed, 'channel_feed')):
             spec = TOPICS[name]
             self._topics[sub.topic_name] = TopicInfo(sub.topic_name, spec.type_name, 'in',
                                                      spec.qos)
@@ -608,6 +613,17 @@ class SimNode(GuardedNode):
             self.get_logger().warning(
                 f'rotation_cmd {value:g} rad/s clamped to the limit {limit:g} rad/s',
                 throttle_duration_sec=5.0)
+
+    def _on_channel_feed(self, data: bytes) -> None:
+        self._received(self._sub_feed.topic_name, 'std_msgs/msg/Float64MultiArray', data)
+        if self._refuse_live('channel_feed'):
+            return
+        try:
+            values = self._codec.decode('std_msgs/msg/Float64MultiArray', data,
+                                        strict=False)['data']
+            self._engine.submit(ChannelFeed(tuple(values)))
+        except (CdrError, ConeFeederError) as exc:
+            self._refuse('channel_feed', 1, str(exc))
 
     def _on_spawn(self, data: bytes) -> None:
         self._received(self._sub_spawn.topic_name, 'geometry_msgs/msg/PoseArray', data)

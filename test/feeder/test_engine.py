@@ -525,3 +525,24 @@ def test_the_weigher_below_the_cone_takes_every_exit() -> None:
     with pytest.raises(ParameterError, match='weigher.max_heads'):
         EngineConfig(model=ModelParams(channels=ChannelLayout(count=40)),
                      weigher=WeigherParams(max_heads=14))
+
+
+def test_channel_feed_sets_the_troughs_and_is_checked() -> None:
+    from cone_feeder_sim.feeder.engine import ChannelFeed
+    from cone_feeder_sim.weigher.machine import WeigherParams
+    engine = FeederEngine(EngineConfig(drive=DriveParams(pattern=((2.0, -8.0), (2.0, 8.0))),
+                                       feed=FeedParams(rate=10.0), weigher=WeigherParams()))
+    engine.submit(ChannelFeed((0.0,) * 14))  # every trough stopped
+    for _ in range(500):
+        assert not engine.tick().packs
+    balance = engine.weigher.balance()
+    assert balance['in'] > 0.0 and balance['troughs'] == balance['in']
+    engine.submit(ChannelFeed((1.0,) * 14))
+    packs = sum((list(engine.tick().packs) for _ in range(300)), [])
+    assert packs and engine.weigher.amplitude.tolist() == [1.0] * 14
+    for bad, match in [((1.0,) * 13, '14 amplitudes'), ((2.5,) + (1.0,) * 13, r'\[0, 2\]'),
+                       ((math.nan,) * 14, r'\[0, 2\]'), (('x',) * 14, 'numbers')]:
+        with pytest.raises(ParameterError, match=match):
+            engine.submit(ChannelFeed(bad))
+    with pytest.raises(InputError, match='no weigher'):
+        FeederEngine(EngineConfig()).submit(ChannelFeed((1.0,) * 14))

@@ -32,8 +32,8 @@ from typing import Any
 from cone_feeder_sim.cli import main as cli_main
 from cone_feeder_sim.errors import ConeFeederError
 from cone_feeder_sim.feeder.engine import (
-    DriveParams, EngineConfig, FeederEngine, FeedParams, PieceSpec, Reconfigure, ResetRequest,
-    RotationCommand, SpawnRequest)
+    ChannelFeed, DriveParams, EngineConfig, FeederEngine, FeedParams, PieceSpec, Reconfigure,
+    ResetRequest, RotationCommand, SpawnRequest)
 from cone_feeder_sim.formats.cdr import encode
 from cone_feeder_sim.formats.pointcloud import EXIT_DTYPE
 from cone_feeder_sim.formats.run_recorder import RunRecorder
@@ -42,6 +42,7 @@ from cone_feeder_sim.formats.runlog import (
     input_event, METADATA_NAME, parameter_text)
 from cone_feeder_sim.formats.topics import RUNNER_TOPICS, TOPICS
 from cone_feeder_sim.physics.params import ProductParams
+from cone_feeder_sim.weigher.machine import WeigherParams
 import mcap.exceptions
 import mcap.reader
 from mcap.records import Message
@@ -73,12 +74,14 @@ def inputs() -> list[Any]:
                     feed=FeedParams(rate=30.0, d_values=(30.0, 750.0), mass_rel_std=0.1)),
         Reconfigure(feed=FeedParams(rate=0.0)),
         ResetRequest(),
+        ChannelFeed(tuple(0.1 * k / 3.0 for k in range(14))),  # (a reset restores 1.0)
     ]
 
 
 def test_input_events_round_trip_through_json_exactly() -> None:
     config = EngineConfig(feed=FeedParams(rate=20.0), seed=7,
-                          initial_pieces=(PieceSpec((0.1, 0.0, 0.03)),))
+                          initial_pieces=(PieceSpec((0.1, 0.0, 0.03)),),
+                          weigher=WeigherParams())
     direct, again = FeederEngine(config), FeederEngine(config)
     for tick, item in enumerate(inputs() * 2):
         text = event_text(input_event(tick, tick * config.dt, item))
@@ -93,6 +96,8 @@ def test_input_events_round_trip_through_json_exactly() -> None:
             np.testing.assert_array_equal(a.masses, b.masses)
             assert (a.angle, a.omega) == (b.angle, b.omega)
     assert direct.drive == again.drive and direct.feed == again.feed
+    np.testing.assert_array_equal(direct.weigher.amplitude, again.weigher.amplitude)
+    assert direct.weigher.amplitude[3] == 0.1 * 3 / 3.0
 
 
 def test_malformed_or_unknown_events_are_refused() -> None:

@@ -246,6 +246,20 @@ def test_the_weigher_publishes_hoppers_packs_and_statistics(ros: Ros) -> None:
     assert balance['in'] == pytest.approx(float(sim.last_tick.channel_mass.sum()), rel=1e-12)
 
 
+def test_channel_feed_sets_the_troughs(ros: Ros) -> None:
+    from std_msgs.msg import Float64MultiArray
+    sim = ros.sim(start_paused=True)
+    pub = ros.client.create_publisher(Float64MultiArray, 'channel_feed', 10)
+    assert ros.spin_until(lambda: pub.get_subscription_count() > 0, 20.0)
+    pub.publish(Float64MultiArray(data=[0.5] * 7 + [0.0] * 7))
+    assert ros.spin_until(lambda: len(sim.engine.pending) == 1, 20.0)
+    sim.step()
+    assert sim.engine.weigher.amplitude.tolist() == [0.5] * 7 + [0.0] * 7
+    refused = sim._refused
+    pub.publish(Float64MultiArray(data=[1.0] * 3))  # not one per channel
+    assert ros.spin_until(lambda: sim._refused > refused, 20.0)
+
+
 def test_published_messages_carry_the_engine_state(ros: Ros) -> None:
     sim = ros.sim(namespace='/feeder1', real_time_factor=0.0, publish_clock=True)
     records = collect(sim)
@@ -499,7 +513,8 @@ def test_topics_are_relative_and_described_for_recording(ros: Ros) -> None:
     assert {'/line2/particles', '/line2/particle_states', '/line2/exit_events',
             '/line2/channel_mass', '/line2/cone_state', '/line2/markers', '/diagnostics',
             '/line2/rotation_cmd', '/line2/spawn', '/line2/sim_node/events',
-            '/line2/hopper_weights', '/line2/pack_events'} == set(topics)
+            '/line2/hopper_weights', '/line2/pack_events', '/line2/channel_feed'} == set(topics)
+    assert topics['/line2/channel_feed'].direction == 'in'
     assert topics['/line2/hopper_weights'].qos.durability == 'transient_local'
     assert topics['/line2/pack_events'].qos.depth == 1000
     assert topics['/line2/exit_events'].qos.depth == 1000
