@@ -197,7 +197,8 @@ def test_recording_holds_every_topic_the_inputs_and_the_parameters(
     params = json.loads(run['parameters_json'])
     assert set(params) == {spec.name for spec in parameter_specs()}  # every parameter
     assert json.loads(run['engine_config'])['seed'] == 0
-    assert json.loads(run['input_topics']) == ['/line/rotation_cmd', '/line/spawn']
+    assert json.loads(run['input_topics']) == [
+        '/line/channel_feed', '/line/rotation_cmd', '/line/spawn']
     assert meta[END_METADATA_NAME]['ticks'] == str(ticks)
     with path.open('rb') as stream:
         summary = mcap.reader.make_reader(stream).get_summary()
