@@ -70,7 +70,7 @@ from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
     add_particles, advance, as_points, check_positions, ExitEvents, Failure, SimParams, SimState,
     StepStats, warm_up, world_from_cone)
-from ..weigher.machine import Pack, Weigher, WeigherParams, WeigherStats
+from ..weigher.machine import check_machine, Pack, Weigher, WeigherParams, WeigherStats
 
 __all__ = [
     'ChannelFeed',
@@ -265,7 +265,7 @@ class EngineConfig:
                                                        ENGINE_LIMITS['seed']))
         check_feed_fits(self.model, self.feed)
         if self.weigher is not None:  # one head per channel, a combination it can choose
-            Weigher(self.weigher, self.model.channels.count)
+            check_machine(self.weigher, self.model.channels.count)
         object.__setattr__(self, 'spawn_max_height', check_number(
             'spawn.max_height', self.spawn_max_height, ENGINE_LIMITS['spawn_max_height']))
         object.__setattr__(self, 'initial_pieces', tuple(self.initial_pieces))

@@ -51,7 +51,7 @@ from ..physics.params import (
     interaction_params_from_mapping, PRODUCT_LIMITS, solver_params_from_mapping)
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import check_positions, resting_height
-from ..weigher.machine import Weigher
+from ..weigher.machine import check_machine
 
 SCENARIO_KEYS = ('duration', 'parameters', 'model', 'solver', 'interactions', 'weigher',
                  'output_interval', 'rotation', 'particles')
@@ -142,7 +142,7 @@ def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenari
     if 'weigher' in content:  # weigher: {} is the default machine of config/weigher.yaml
         try:
             weigher = load_weigher_params(overrides=content['weigher'] or {})
-            Weigher(weigher, model.channels.count)  # one head per channel: a machine it runs
+            check_machine(weigher, model.channels.count)  # one head per channel
         except ConeFeederError as exc:
             raise ScenarioError(str(exc)) from exc
     return Scenario(duration=duration, model=model, solver=solver, rotation=rotation,

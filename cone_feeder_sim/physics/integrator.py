@@ -111,6 +111,22 @@ def growth_after_acceptance(h, err, h_acc, err_acc, after_rejection):
 
 
 @jit
+def after_acceptance(t, t_end, h, h_prop, h_max, err, h_acc, err_acc, after_rejection,
+                     truncated):
+    """
+    Return (t, h_prop, h_acc, err_acc) after an accepted step h (s) from t with error err.
+
+    A step truncated at the segment end t_end lands there and keeps the larger of the
+    proposal it replaced and the grown step; the previous accepted step and error become
+    this one's (the error floored at 1e-4).
+    """
+    grow = growth_after_acceptance(h, err, h_acc, err_acc, after_rejection)
+    if truncated:
+        return t_end, min(h_max, max(h_prop, h * grow)), h, max(err, 1e-4)
+    return t + h, min(h_max, h * grow), h, max(err, 1e-4)
+
+
+@jit
 def hermite_position(theta, h, xa, wa, xb, wb, i):
     """Return component i of the cubic Hermite interpolant of positions at fraction theta."""
     t2 = theta * theta
@@ -214,16 +230,9 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
             for i in range(y.shape[0]):
                 y[i] = y1[i]
             fresh = True
-            grow = growth_after_acceptance(h, err, h_acc, err_acc, rejected)
+            t, h_prop, h_acc, err_acc = after_acceptance(t, t_end, h, h_prop, h_max, err,
+                                                         h_acc, err_acc, rejected, truncated)
             rejected = False
-            h_acc = h
-            err_acc = max(err, 1e-4)
-            if truncated:
-                t = t_end
-                h_prop = min(h_max, max(h_prop, h * grow))
-            else:
-                t += h
-                h_prop = min(h_max, h * grow)
     return ACTIVE, t, h_prop
 
 

@@ -39,7 +39,7 @@ import numpy as np
 from .band import band_factor, band_solve
 from .contact import pair_force
 from .integrator import (
-    ACTIVE, error_norm, EXITED, FAILED, growth_after_acceptance, locate_exit,
+    ACTIVE, after_acceptance, error_norm, EXITED, FAILED, locate_exit,
     proposal_after_rejection, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS,
     STAT_ACCEPTED, STAT_REASON, STAT_REJECTED)
 from .model import jacobian, rhs, rhs_omega_derivative, STATE_SIZE
@@ -424,16 +424,9 @@ def advance_island(y, products, pairs, pos, kl, machine, seg_t, seg_omega, seg_d
             for i in range(size):
                 flat[i] = y1[i]
             fresh = True
-            grow = growth_after_acceptance(h, err, h_acc, err_acc, rejected)
+            t, h_prop, h_acc, err_acc = after_acceptance(t, t_end, h, h_prop, h_max, err,
+                                                         h_acc, err_acc, rejected, truncated)
             rejected = False
-            h_acc = h
-            err_acc = max(err, 1e-4)
-            if truncated:
-                t = t_end
-                h_prop = min(h_max, max(h_prop, h * grow))
-            else:
-                t += h
-                h_prop = min(h_max, h * grow)
     return ACTIVE, t, h_prop, -1
 
 

@@ -43,7 +43,7 @@ from .combination import MAX_SUBSETS, select_combination, subset_count
 from ..errors import ParameterError
 from ..physics.params import check_integer, check_number, Limit, MODEL_LIMITS
 
-__all__ = ['HEADS_LIMIT', 'Pack', 'Weigher', 'WEIGHER_LIMITS', 'WeigherParams',
+__all__ = ['check_machine', 'HEADS_LIMIT', 'Pack', 'Weigher', 'WEIGHER_LIMITS', 'WeigherParams',
            'WeigherStats', 'weigher_params_from_mapping']
 
 #: Ranges of the weigher's parameters (units in the third field).
@@ -104,6 +104,23 @@ class WeigherParams:
     def cycle(self) -> float:
         """Return the machine cycle in s."""
         return 60.0 / self.cycles_per_minute
+
+
+def check_machine(params: WeigherParams, heads: int) -> int:
+    """
+    Return ``heads`` (one per cone channel) once a machine of them can run with ``params``.
+
+    Refuses a head count outside :data:`HEADS_LIMIT` and a machine whose combinations are
+    too many to enumerate every cycle (:data:`combination.MAX_SUBSETS`), naming the key.
+    """
+    heads = check_integer('heads (model.channel_count)', heads, HEADS_LIMIT)
+    count = subset_count(heads, params.min_heads, params.max_heads)
+    if count > MAX_SUBSETS:
+        raise ParameterError(
+            f"parameter 'weigher.max_heads': {heads} heads with {params.min_heads}.."
+            f'{params.max_heads} per pack are {count:,} combinations, more than '
+            f'{MAX_SUBSETS:,} to choose from each cycle; lower weigher.max_heads')
+    return heads
 
 
 def weigher_params_from_mapping(mapping: Any, base: WeigherParams | None = None) -> WeigherParams:
@@ -167,13 +184,7 @@ class Weigher:
     def __init__(self, params: WeigherParams, heads: int = 14, t0: float = 0.0) -> None:
         """Start an empty machine of ``heads`` heads at t0 (s); the first cycle one later."""
         self.params = params
-        heads = check_integer('heads (model.channel_count)', heads, HEADS_LIMIT)
-        count = subset_count(heads, params.min_heads, params.max_heads)
-        if count > MAX_SUBSETS:
-            raise ParameterError(
-                f"parameter 'weigher.max_heads': {heads} heads with {params.min_heads}.."
-                f'{params.max_heads} per pack are {count:,} combinations, more than '
-                f'{MAX_SUBSETS:,} to choose from each cycle; lower weigher.max_heads')
+        heads = check_machine(params, heads)
         self.heads = heads
         self.t = float(t0)
         self.amplitude = np.ones(heads)
