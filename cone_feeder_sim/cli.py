@@ -29,7 +29,6 @@ Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors; 130 
 
 import argparse
 from collections.abc import Callable, Sequence
-import contextlib
 import os
 from pathlib import Path
 import signal
@@ -41,15 +40,11 @@ from typing import Any, Self, TextIO
 
 from . import __version__
 from .errors import ConeFeederError
-from .feeder.runner import run_scenario
 from .feeder.scenario import Scenario
-from .formats.events_csv import EventsCsvWriter
 from .formats.mcap_reader import recover_mcap
-from .formats.packs_csv import write_packs_csv
-from .formats.runlog import ScenarioRecorder
+from .formats.run_files import run_to_files
 from .formats.scenario_file import load_scenario
 from .physics.simulation import Simulator, StepResult, warm_up
-from .weigher.machine import Weigher
 
 
 class ProgressBar:
@@ -200,38 +195,28 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
                                   '(weigher: {} is the default machine)')
         check_writable(args.packs, 'the packs')
     bar = None if args.quiet else ProgressBar(scenario.duration, err)
-    with StopOnSignals() as stop, contextlib.ExitStack() as outputs:
-        weigher = (Weigher(scenario.weigher, scenario.model.channels.count)
-                   if scenario.weigher is not None else None)
-        recorder = outputs.enter_context(contextlib.closing(ScenarioRecorder(
-            args.mcap, scenario, args.scenario, weigher=weigher))) if args.mcap else None
-        events = outputs.enter_context(EventsCsvWriter(args.events))
-        callbacks = [c for c in (recorder, bar) if c is not None]
-
-        def progress(t: float, sim: Simulator, step: StepResult) -> None:
-            events.write(step.exits)
-            for callback in callbacks:
-                callback(t, sim, step)
-
+    with StopOnSignals() as stop:
         try:
-            result = run_scenario(scenario, progress, stop=stop, weigher=weigher)
+            files = run_to_files(scenario, args.events, packs=args.packs, mcap=args.mcap,
+                                 source=args.scenario, progress=[bar] if bar else [],
+                                 stop=stop)
         finally:
             if bar is not None:
                 bar.end()
-    packed = write_packs_csv(args.packs, result.packs) if args.packs is not None else 0
+    result = files.result
     for failure in result.failures:
         err.write(f'warning: particle {failure.particle_id} removed at t={failure.t:.6f} s: '
                   f'{failure.reason}\n')
-    recorded = f', run recorded to {args.mcap}' if recorder is not None else ''
+    recorded = f', run recorded to {args.mcap}' if args.mcap else ''
     if result.stopped and stop.signum is not None:
         err.write(f'interrupted by {signal.Signals(stop.signum).name} at '
-                  f't = {result.end_time:.3f} s: {events.rows} exits written to '
+                  f't = {result.end_time:.3f} s: {files.events} exits written to '
                   f'{args.events}{recorded}\n')
         return 128 + stop.signum
-    err.write(f'{events.rows} of {len(scenario.particles)} pieces left the cone; '
+    err.write(f'{files.events} of {len(scenario.particles)} pieces left the cone; '
               f'{result.remaining_ids.size} still on it, {len(result.failures)} failed; '
               f'events written to {args.events}\n')
-    if recorder is not None:
+    if args.mcap:
         err.write(f'run recorded to {args.mcap}\n')
     if result.weigher is not None:
         stats = result.weigher.stats()
@@ -240,7 +225,7 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
                   f'g, {100 * stats.under_target:.1f} % under target, '
                   f'{stats.starved_per_cycle:.2f} starved heads per cycle\n')
     if args.packs is not None:
-        err.write(f'{packed} packs written to {args.packs}\n')
+        err.write(f'{files.packs} packs written to {args.packs}\n')
     return 0
 
 

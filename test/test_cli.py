@@ -24,6 +24,7 @@ import signal
 from cone_feeder_sim import cli
 from cone_feeder_sim.cli import main, ProgressBar, StopOnSignals
 from cone_feeder_sim.feeder.runner import run_scenario
+from cone_feeder_sim.formats import run_files
 from cone_feeder_sim.formats.events_csv import EVENT_COLUMNS, EventsCsvWriter
 from cone_feeder_sim.formats.mcap_writer import McapRecorder
 from cone_feeder_sim.formats.scenario_file import scenario_from_mapping
@@ -163,7 +164,7 @@ def test_signal_ends_the_run_after_the_interval(
                 os.kill(os.getpid(), signum)  # handled at once, in this thread
             return count
 
-    monkeypatch.setattr(cli, 'EventsCsvWriter', SignalAfterFirstExit)
+    monkeypatch.setattr(run_files, 'EventsCsvWriter', SignalAfterFirstExit)
     before = signal.getsignal(signum)
     code = main(['run', str(scenario), '--events', str(events), '--mcap', str(run_mcap),
                  '--quiet'])
