@@ -21,7 +21,6 @@ import os
 from pathlib import Path
 import signal
 
-from cone_feeder_sim import cli
 from cone_feeder_sim.cli import main, ProgressBar, StopOnSignals
 from cone_feeder_sim.feeder.runner import run_scenario
 from cone_feeder_sim.formats import run_files
