@@ -177,6 +177,20 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser(
         'compile', help='compile the integration kernel into the numba cache (run once '
                         'after installing, so that no start has to)')
+    sweep = sub.add_parser(
+        'sweep', help='run a scenario many times with other parameters and seeds, on Dask '
+                      '(pip install cone_feeder_sim[sweep])')
+    sweep.add_argument('sweep', metavar='SWEEP.yaml', help='sweep file: a scenario and what '
+                       'varies (grid, random, seeds)')
+    sweep.add_argument('--out', required=True, metavar='DIR',
+                       help='directory of the results (created; a re-run resumes it)')
+    sweep.add_argument('--scheduler', metavar='ADDRESS',
+                       help='address of a running Dask scheduler (tcp://host:port); default: '
+                            'a local cluster of this machine')
+    sweep.add_argument('--workers', type=int, metavar='N',
+                       help='worker processes of the local cluster (default: one per core)')
+    sweep.add_argument('--retry-failed', action='store_true',
+                       help='run the jobs that failed before again')
     recover = sub.add_parser(
         'recover', help='copy the readable part of an unfinished or damaged MCAP file into a '
                         'complete one (with summary and footer)')
@@ -266,6 +280,48 @@ def cmd_compile(err: TextIO) -> int:
     return 0
 
 
+SWEEP_INSTALL = ("the sweep runs on Dask, which is not installed; install it with "
+                 "pip install 'cone_feeder_sim[sweep]' (or pip install 'dask[distributed]')")
+
+
+def cmd_sweep(args: argparse.Namespace, err: TextIO) -> int:
+    """Run a sweep's pending jobs; return 0 if all are done, 1 if some failed."""
+    try:
+        import distributed  # noqa: F401 - the optional dependency, asked for first
+    except ImportError:
+        raise ConeFeederError(SWEEP_INSTALL) from None
+    from .sweep.run import run_sweep
+    from .sweep.spec import load_sweep
+
+    if args.workers is not None:
+        if args.scheduler is not None:
+            raise ConeFeederError('--workers sets the local cluster; a scheduler has its own '
+                                  'workers (give one or the other)')
+        if args.workers < 1:
+            raise ConeFeederError(f'--workers must be at least 1, got {args.workers}')
+    sweep = load_sweep(args.sweep)
+
+    def log(line: str) -> None:
+        err.write(line + '\n')
+        err.flush()
+
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # as Ctrl-C
+    try:
+        report = run_sweep(sweep, args.out, scheduler=args.scheduler, workers=args.workers,
+                           retry_failed=args.retry_failed, log=log)
+    except KeyboardInterrupt:
+        err.write(f'interrupted: the finished jobs are in {args.out} (summary.csv); run the '
+                  'same command again to run the others\n')
+        return 128 + signal.SIGINT
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    figure = f', figure {report.figure}' if report.figure else ''
+    err.write(f'{report.done} of {report.jobs} jobs done, {report.failed} failed '
+              f'({report.ran} run now, {report.skipped} finished before); summary '
+              f'{report.summary}{figure}\n')
+    return 1 if report.failed else 0
+
+
 def cmd_recover(args: argparse.Namespace, err: TextIO) -> int:
     """Recover the readable part of an MCAP file; return the exit code."""
     if Path(args.out).resolve() == Path(args.mcap).resolve():
@@ -287,6 +343,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return cmd_report(args, sys.stderr)
         if args.command == 'recover':
             return cmd_recover(args, sys.stderr)
+        if args.command == 'sweep':
+            return cmd_sweep(args, sys.stderr)
         if args.command == 'compile':
             return cmd_compile(sys.stderr)
     except ConeFeederError as exc:

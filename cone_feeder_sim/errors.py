@@ -41,3 +41,7 @@ class MessageError(ConeFeederError, ValueError):
 
 class ReportError(ConeFeederError):
     """A recording cannot be read for a report, or the report cannot be written."""
+
+
+class SweepError(ConeFeederError, ValueError):
+    """A sweep file is malformed, or its output directory holds another sweep's results."""

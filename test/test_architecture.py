@@ -15,7 +15,7 @@
 """
 The rooms of the package import one way (doc/architecture.md).
 
-physics <- feeder <- formats <- ros, report <- cli: a module imports only from its own room
+physics <- feeder <- formats <- ros, report, sweep <- cli: a module imports only from its own room
 and the rooms before it; physics imports no rclpy, mcap or yaml; nothing below ros imports
 rclpy or ROS message packages.
 """
@@ -26,9 +26,13 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / 'cone_feeder_sim'
-#: Rank of each room; physics and weigher, ros and report are side by side.
+#: Rank of each room; physics and weigher, ros, report and sweep are side by side.
 RANK = {'errors': 0, '__init__': 0, 'physics': 1, 'weigher': 1, 'feeder': 2, 'formats': 3,
-        'ros': 4, 'report': 4, 'cli': 5}
+        'ros': 4, 'report': 4, 'sweep': 4, 'cli': 5}
+SIDE_BY_SIDE = ('ros', 'report', 'sweep')
+#: The optional dependency of the sweep: imported by its Dask modules only (and the cli's
+#: check that it is installed).
+DASK_MODULES = {'sweep/cluster.py', 'sweep/run.py', 'cli.py'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs', 'geometry_msgs',
                 'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'builtin_interfaces'}  # ament_index_python: an optional look-up of files
@@ -69,9 +73,12 @@ def test_imports_run_one_way(path: Path) -> None:
         if top == 'cone_feeder_sim' and target is not None:
             target = target.removesuffix('.py')
             assert RANK[target] <= RANK[source], f'{source} imports {target}'
-            assert {source, target} != {'ros', 'report'}, f'{source} imports {target}'
+            assert source == target or not {source, target} <= set(SIDE_BY_SIDE), (
+                f'{source} imports {target}')
         if RANK[source] < RANK['ros']:
             assert top not in ROS_PACKAGES, f'{source} imports {top}'
+        if str(path.relative_to(PACKAGE)) not in DASK_MODULES:
+            assert top not in {'dask', 'distributed'}, f'{path.name} imports {top}'
         if source == 'physics':
             assert top not in {'mcap', 'yaml', 'rosbags', 'matplotlib'}, top
 

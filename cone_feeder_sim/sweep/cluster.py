@@ -1,0 +1,120 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+The jobs of a sweep on Dask: a ``LocalCluster`` of this machine's cores, or a scheduler.
+
+Without an address, :func:`dask_client` starts a ``LocalCluster`` with one worker process
+per core, each with one thread and numba's thread pool of one (``NUMBA_NUM_THREADS=1``):
+the jobs, not the pieces of one job, are what runs in parallel. With an address
+(``tcp://host:port``) it connects to a running scheduler (``dask scheduler`` and ``dask
+worker``, dask-jobqueue on SLURM, dask-kubernetes, ``dask ssh``); its workers need
+cone_feeder_sim installed, not the sweep's directory, since every job's files come back
+to the client. :class:`KernelLoader` loads the compiled kernels once per worker as it
+joins. Dask retries the job of a worker that dies on another one (up to
+``distributed.scheduler.allowed-failures`` deaths, then the job is recorded as failed).
+"""
+
+import asyncio
+from collections.abc import Callable, Iterable, Iterator
+import contextlib
+import logging
+import os
+
+import dask
+from distributed import as_completed, Client, LocalCluster
+from distributed.diagnostics.plugin import WorkerPlugin
+
+from .job import JobOutcome, run_job
+from .spec import Job
+from ..errors import SweepError
+from ..physics.simulation import warm_up
+
+
+class KernelLoader(WorkerPlugin):
+    """Load (or compile) the integration kernels on a worker when it joins, once."""
+
+    name = 'cone-feeder-sim-kernels'
+
+    async def setup(self, worker: object) -> None:
+        """Load the kernels beside the worker's event loop (a compile can take a minute)."""
+        await asyncio.to_thread(warm_up)
+
+
+def available_cores() -> int:
+    """Return the cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Client]:
+    """
+    Yield a Dask client: of a new LocalCluster (``workers`` processes), or of ``scheduler``.
+
+    Either way the workers have :class:`KernelLoader`. Closing closes the local cluster.
+    """
+    with contextlib.ExitStack() as stack:
+        if scheduler is None:
+            count = workers if workers is not None else available_cores()
+            cluster = stack.enter_context(LocalCluster(
+                n_workers=count, threads_per_worker=1, processes=True,
+                dashboard_address=None, silence_logs=logging.ERROR,
+                env={'NUMBA_NUM_THREADS': '1'}))
+            client = stack.enter_context(Client(cluster))
+        else:
+            try:
+                client = stack.enter_context(Client(scheduler, timeout='30s'))
+            except (OSError, ValueError) as exc:
+                raise SweepError(f'cannot reach the Dask scheduler at {scheduler}: '
+                                 f'{exc}') from exc
+        client.register_plugin(KernelLoader())
+        yield client
+
+
+def run_jobs(client: Client, jobs: Iterable[Job],
+             done: Callable[[Job, JobOutcome], None]) -> None:
+    """
+    Run jobs on the client's cluster; call ``done`` with each outcome as it comes.
+
+    A job whose workers died too often, or whose task failed outside the job (a worker
+    without cone_feeder_sim, say), is a failed outcome. Jobs not yet done when this ends
+    early (an exception in ``done``, Ctrl-C) are cancelled.
+    """
+    futures = {client.submit(run_job, job, key=f'cone-feeder-sim-{job.name}-{job.digest[:16]}',
+                             retries=0): job for job in jobs}
+    try:
+        for future in as_completed(futures):
+            job = futures.pop(future)
+            try:
+                outcome = future.result()
+            except Exception as exc:  # noqa: B902 - KilledWorker, a worker's import error...
+                outcome = JobOutcome(name=job.name, digest=job.digest, status='failed',
+                                     error=_task_error(exc))
+            future.release()
+            done(job, outcome)
+    finally:
+        if futures:
+            client.cancel(list(futures))
+
+
+def _task_error(exc: Exception) -> str:
+    if type(exc).__name__ == 'KilledWorker':
+        allowed = dask.config.get('distributed.scheduler.allowed-failures')
+        return (f'KilledWorker: the workers running it died {allowed + 1} times '
+                f'(distributed.scheduler.allowed-failures = {allowed}): {exc}')
+    return f'{type(exc).__name__}: {exc}'
