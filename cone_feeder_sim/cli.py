@@ -280,7 +280,7 @@ def cmd_compile(err: TextIO) -> int:
     return 0
 
 
-SWEEP_INSTALL = ("the sweep runs on Dask, which is not installed; install it with "
+SWEEP_INSTALL = ('the sweep runs on Dask, which is not installed; install it with '
                  "pip install 'cone_feeder_sim[sweep]' (or pip install 'dask[distributed]')")
 
 

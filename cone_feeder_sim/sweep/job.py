@@ -25,9 +25,11 @@ system, and the client alone writes the sweep's directory. A job that raises is 
 (status ``failed`` with its error), not an exception.
 """
 
+import contextlib
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
+import shutil
 import socket
 import tempfile
 import time
@@ -110,8 +112,10 @@ def run_job(job: Job) -> JobOutcome:
     wall, cpu = time.perf_counter(), time.thread_time()
     worker = f'{socket.gethostname()}:{os.getpid()}'
     set_threads(1)  # numba's thread count is per thread: this job's thread
-    try:
-        with tempfile.TemporaryDirectory(prefix=f'cone-feeder-sim-job-{job.name}-') as tmp:
+    tmp = tempfile.mkdtemp(prefix=f'cone-feeder-sim-job-{job.name}-')
+    try:  # error messages name the job's directory of the sweep, not the temporary one
+        with contextlib.ExitStack() as cleanup:
+            cleanup.callback(shutil.rmtree, tmp, ignore_errors=True)
             directory = Path(tmp)
             scenario = load_scenario(write_job_files(job, directory))
             packs = directory / PACKS_NAME if scenario.weigher is not None else None
@@ -122,7 +126,7 @@ def run_job(job: Job) -> JobOutcome:
                        for path in (directory / EVENTS_NAME, packs) if path is not None}
     except Exception as exc:  # noqa: B902 - a job's error is its result; the sweep goes on
         return JobOutcome(name=job.name, digest=job.digest, status='failed',
-                          error=f'{type(exc).__name__}: {exc}',
+                          error=f'{type(exc).__name__}: {exc}'.replace(tmp, f'jobs/{job.name}'),
                           traceback=traceback.format_exc(),
                           cpu_s=time.thread_time() - cpu, wall_s=time.perf_counter() - wall,
                           worker=worker)

@@ -57,7 +57,7 @@ import yaml
 
 from ..errors import ConeFeederError, SweepError
 from ..formats.parameter_file import read_yaml
-from ..formats.scenario_file import SCENARIO_KEYS, scenario_from_mapping
+from ..formats.scenario_file import scenario_from_mapping, SCENARIO_KEYS
 
 SWEEP_KEYS = ('scenario', 'grid', 'random', 'seeds')
 RANDOM_KEYS = ('samples', 'seed', 'keys')
@@ -335,7 +335,7 @@ def sweep_from_mapping(content: Any, sweep_dir: Path, source: str = '') -> Sweep
         raise SweepError('a sweep varies something: give grid, random or seeds')
     _check_overlap(keys)
     if seeds is not None and 'weigher' not in base.mapping and not any(
-            k.startswith('weigher.') for k in keys):
+            k.startswith('weigher.') for k in [*grid, *dists]):
         raise SweepError(f'seeds: the scenario has no weigher: section; seeds set {SEED_KEY}, '
                          "the seed of the weigher's load-cell noise, its only random part")
     # every value of every key alone on the base, so that an error names its key

@@ -115,7 +115,7 @@ class SweepStore:
         return self.out / JOBS_DIR / job.name
 
     def outcome(self, job: Job) -> dict[str, Any] | None:
-        """Return a finished job's stored outcome (its result.json), or None."""
+        """Return the parsed result.json of a finished job, or None."""
         path = self.job_dir(job) / RESULT_FILE
         try:
             held = json.loads(path.read_text(encoding='utf-8'))
@@ -196,8 +196,8 @@ def summary_columns(keys: tuple[str, ...], rows: list[dict[str, Any]]) -> list[s
     and ``packs_csv`` (the job's files, relative to the sweep directory).
     """
     present = set().union(*(row.keys() for row in rows)) if rows else set()
-    metrics = [m for m in METRICS if m in present or m in ('exits', 'mean_exit_time', 'mass',
-                                                            'failures', 'steps')]
+    always = ('exits', 'failures', 'steps', 'mean_exit_time', 'mass')
+    metrics = [m for m in METRICS if m in present or m in always]
     channels = sorted(c for c in present if c.startswith('mass_ch'))
     return ['job', *keys, 'status', 'error', *metrics, *channels, 'cpu_s', 'wall_s',
             'worker', 'events', 'packs_csv']

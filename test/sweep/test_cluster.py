@@ -1,0 +1,236 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+Sweeps on real Dask processes: a worker killed mid-sweep, an interrupted sweep resumed.
+
+A scheduler and two workers started with the ``dask`` command, and the local cluster of
+``cone-feeder-sim sweep``; results equal to ``cone-feeder-sim run`` of each job, bit for bit.
+"""
+
+import dataclasses
+import json
+import math
+import os
+from pathlib import Path
+import re
+import signal
+import subprocess
+import sys
+import time
+
+from cone_feeder_sim.cli import main
+from cone_feeder_sim.sweep.cluster import dask_client, KernelLoader
+from cone_feeder_sim.sweep.run import run_sweep
+from cone_feeder_sim.sweep.spec import load_sweep
+from distributed import Client
+import pytest
+import yaml
+
+BIN = Path(sys.executable).parent
+#: Generous caps on waiting for progress (processes start, load kernels, run jobs).
+START_TIMEOUT = 120.0
+SWEEP_TIMEOUT = 600.0
+#: Twelve touching pieces driven back and forth, then off the cone: each job is about a
+#: second of CPU on the development machine (contact makes it expensive), so that a worker
+#: is always in the middle of one.
+PIECES = [{'position': [0.03 + 0.01 * (i % 8) * math.cos(i),
+                        0.03 + 0.01 * (i % 8) * math.sin(i), 0.0], 'on_surface': True}
+          for i in range(12)]
+BASE = {'duration': 14.0, 'interactions': {'enabled': True},
+        'rotation': [[0.0, 0.0], [1.0, 4.0], [3.0, 4.0], [4.0, -4.0], [9.0, -4.0],
+                     [10.0, 9.0]],
+        'particles': PIECES}
+SWEEP = {'scenario': 'base.yaml',
+         'grid': {'model.d': [30.0, 135.0, 225.0, 750.0], 'model.mu_C': [0.7, 0.85]}}
+
+
+@pytest.fixture
+def sweep_file(tmp_path: Path) -> Path:
+    (tmp_path / 'base.yaml').write_text(yaml.safe_dump(BASE))
+    path = tmp_path / 'sweep.yaml'
+    path.write_text(yaml.safe_dump(SWEEP))
+    return path
+
+
+def serial_events(sweep_path: Path, out: Path, tmp_path: Path) -> dict[str, bytes]:
+    """Run every job's scenario file of a sweep directory with cone-feeder-sim run."""
+    events = {}
+    for job in load_sweep(sweep_path).jobs:
+        target = tmp_path / f'serial-{job.name}.csv'
+        scenario = out / 'jobs' / job.name / 'scenario.yaml'
+        assert main(['run', str(scenario), '--events', str(target), '--quiet']) == 0
+        events[job.name] = target.read_bytes()
+    return events
+
+
+def results(out: Path) -> dict[str, dict]:
+    """Return the finished jobs' result.json of a sweep directory."""
+    found = {}
+    for path in sorted(out.glob('jobs/*/result.json')):
+        found[path.parent.name] = json.loads(path.read_text())
+    return found
+
+
+def wait_for(predicate, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        time.sleep(0.05)
+
+
+@pytest.fixture
+def scheduler(tmp_path: Path):
+    """Start ``dask scheduler`` and two ``dask worker`` processes; yield (address, workers)."""
+    env = {**os.environ, 'NUMBA_NUM_THREADS': '1'}
+    info = tmp_path / 'scheduler.json'
+    procs = [subprocess.Popen(
+        [str(BIN / 'dask'), 'scheduler', '--host', '127.0.0.1', '--port', '0',
+         '--no-dashboard', '--scheduler-file', str(info)],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        wait_for(info.exists, START_TIMEOUT, 'the scheduler')
+        workers = [subprocess.Popen(
+            [str(BIN / 'dask'), 'worker', '--scheduler-file', str(info), '--nthreads', '1',
+             '--no-nanny', '--no-dashboard', '--name', f'worker-{i}'],
+            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(2)]
+        procs += workers
+        address = json.loads(info.read_text())['address']
+        with Client(address, timeout='60s') as client:
+            client.wait_for_workers(2, timeout=START_TIMEOUT)
+        yield address, workers
+    finally:
+        for proc in procs:
+            proc.kill()
+            proc.wait()
+
+
+def test_a_killed_worker_leaves_the_sweep_complete_and_identical(
+        scheduler, sweep_file: Path, tmp_path: Path) -> None:
+    address, workers = scheduler
+    out = tmp_path / 'out'
+    with Client(address, timeout='60s') as client:
+        client.register_plugin(KernelLoader())
+
+        def kernel_loads() -> int:
+            """Kernels loaded or compiled by this worker (numba's dispatcher statistics)."""
+            import numba.core.registry
+            total = 0
+            for module in [m for n, m in sys.modules.items()
+                           if n.startswith('cone_feeder_sim.') and m is not None]:
+                for obj in vars(module).values():
+                    if isinstance(obj, numba.core.registry.CPUDispatcher):
+                        stats = obj.stats
+                        total += sum(stats.cache_hits.values()) + sum(
+                            stats.cache_misses.values())
+            return total
+
+        loaded = client.run(kernel_loads)
+        assert all(count > 0 for count in loaded.values())
+        pids = client.run(os.getpid)
+        victim_pid = workers[0].pid
+        victim = next(addr for addr, pid in pids.items() if pid == victim_pid)
+        survivor = next(addr for addr in pids if addr != victim)
+        sweep = subprocess.Popen(
+            [str(BIN / 'cone-feeder-sim'), 'sweep', str(sweep_file), '--out', str(out),
+             '--scheduler', address], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            text=True)
+        try:
+            wait_for(lambda: 1 <= len(results(out)) and client.processing([victim])[victim],
+                     SWEEP_TIMEOUT, 'a finished job and one in flight on the victim')
+            in_flight = client.processing([victim])[victim]
+            before = set(results(out))
+            workers[0].send_signal(signal.SIGKILL)
+            log, _ = sweep.communicate(timeout=SWEEP_TIMEOUT)
+        finally:
+            sweep.kill()
+        assert sweep.returncode == 0, log
+        assert len(before) < 8 and in_flight
+        assert client.run(kernel_loads) == {survivor: loaded[survivor]}  # none per job
+    done = results(out)
+    assert sorted(done) == [f'{i:05d}' for i in range(8)]
+    assert {r['status'] for r in done.values()} == {'done'}
+    after = {name for name in done if name not in before}
+    survivor_pid = f':{pids[survivor]}'
+    assert all(done[name]['worker'].endswith(survivor_pid) for name in after
+               if any(name in key for key in in_flight))
+    assert '8 of 8 jobs done, 0 failed' in log
+    serial = serial_events(sweep_file, out, tmp_path)
+    assert {name: (out / 'jobs' / name / 'events.csv').read_bytes() for name in done} == serial
+    assert any(len(data.splitlines()) > 1 for data in serial.values())  # exits to compare
+
+
+def test_a_job_that_raises_fails_alone(scheduler, sweep_file: Path, tmp_path: Path) -> None:
+    address, _ = scheduler
+    sweep = load_sweep(sweep_file)
+    broken = dataclasses.replace(sweep.jobs[2], scenario='duration: -1.0\n')
+    sweep = dataclasses.replace(sweep, jobs=(*sweep.jobs[:2], broken, *sweep.jobs[3:5]))
+    lines: list[str] = []
+    report = run_sweep(sweep, tmp_path / 'out', scheduler=address, log=lines.append)
+    assert (report.done, report.failed, report.ran) == (4, 1, 5)
+    done = results(tmp_path / 'out')
+    assert done['00002']['status'] == 'failed'
+    assert done['00002']['error'].startswith('ScenarioError: ')
+    assert done['00002']['error'] == ('ScenarioError: jobs/00002/scenario.yaml: scenario is '
+                                      "missing the key 'rotation'")
+    assert any(re.search(r'job 00002 failed .*ScenarioError', line) for line in lines)
+    with (tmp_path / 'out' / 'summary.csv').open() as stream:
+        summary = stream.read()
+    assert summary.count('\n') == 6 and ',failed,ScenarioError: ' in summary
+
+
+def test_an_interrupted_sweep_runs_only_its_missing_jobs(sweep_file: Path,
+                                                         tmp_path: Path) -> None:
+    out = tmp_path / 'out'
+    command = [str(BIN / 'cone-feeder-sim'), 'sweep', str(sweep_file), '--out', str(out),
+               '--workers', '2']
+    first = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                             text=True, preexec_fn=lambda: signal.signal(signal.SIGINT,
+                                                                         signal.SIG_DFL))
+    try:
+        wait_for(lambda: len(results(out)) >= 2, SWEEP_TIMEOUT, 'two finished jobs')
+        first.send_signal(signal.SIGINT)
+        log, _ = first.communicate(timeout=SWEEP_TIMEOUT)
+    finally:
+        first.kill()
+    assert first.returncode == 128 + signal.SIGINT, log
+    assert 'interrupted: the finished jobs are in' in log
+    finished = results(out)
+    assert 2 <= len(finished) < 8
+    stamps = {name: (out / 'jobs' / name / 'result.json').stat().st_mtime_ns
+              for name in finished}
+    second = subprocess.run(command, capture_output=True, text=True, timeout=SWEEP_TIMEOUT)
+    assert second.returncode == 0, second.stderr
+    assert f'{len(finished)} finished before, {8 - len(finished)} to run' in second.stderr
+    ran = set(re.findall(r'\] job (\d+) done', second.stderr))
+    assert ran == {f'{i:05d}' for i in range(8)} - set(finished)
+    assert {name: (out / 'jobs' / name / 'result.json').stat().st_mtime_ns
+            for name in finished} == stamps
+    done = results(out)
+    assert len(done) == 8 and {r['status'] for r in done.values()} == {'done'}
+    serial = serial_events(sweep_file, out, tmp_path)
+    assert {name: (out / 'jobs' / name / 'events.csv').read_bytes() for name in done} == serial
+    with (out / 'summary.csv').open() as stream:
+        assert stream.read().count('\n') == 9
+    assert (out / 'summary.png').stat().st_size > 0
+
+
+def test_the_local_cluster_has_one_single_threaded_worker_per_process() -> None:
+    with dask_client(workers=2) as client:
+        info = client.scheduler_info()['workers']
+        assert [w['nthreads'] for w in info.values()] == [1, 1]
+        assert len(set(client.run(os.getpid).values())) == 2
+        threads = client.run(lambda: __import__('numba').config.NUMBA_NUM_THREADS)
+        assert set(threads.values()) == {1}
