@@ -42,6 +42,9 @@ from .spec import Job
 from ..errors import SweepError
 from ..physics.simulation import warm_up
 
+#: How long to try reaching a scheduler before giving up.
+CONNECT_TIMEOUT = '30s'
+
 
 class KernelLoader(WorkerPlugin):
     """Load (or compile) the integration kernels on a worker when it joins, once."""
@@ -78,7 +81,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
             client = stack.enter_context(Client(cluster))
         else:
             try:
-                client = stack.enter_context(Client(scheduler, timeout='30s'))
+                client = stack.enter_context(Client(scheduler, timeout=CONNECT_TIMEOUT))
             except (OSError, ValueError) as exc:
                 raise SweepError(f'cannot reach the Dask scheduler at {scheduler}: '
                                  f'{exc}') from exc

@@ -1,0 +1,75 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""The command `cone-feeder-sim sweep`: arguments, a missing Dask, a bad sweep, no scheduler."""
+
+from pathlib import Path
+import sys
+
+from cone_feeder_sim.cli import main
+from cone_feeder_sim.sweep import cluster
+import pytest
+
+SWEEP = """\
+scenario:
+  duration: 1.0
+  rotation: [[0.0, 1.0]]
+  particles: [{position: [0.1, 0.0, 0.0], on_surface: true}]
+grid: {model.d: [30.0, 225.0]}
+"""
+
+
+@pytest.fixture
+def sweep_file(tmp_path: Path) -> Path:
+    path = tmp_path / 'sweep.yaml'
+    path.write_text(SWEEP)
+    return path
+
+
+def test_without_dask_it_says_how_to_install_it(
+        sweep_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture) -> None:
+    monkeypatch.setitem(sys.modules, 'distributed', None)  # import distributed fails
+    assert main(['sweep', str(sweep_file), '--out', str(tmp_path / 'out')]) == 2
+    assert "pip install 'cone_feeder_sim[sweep]'" in capsys.readouterr().err
+    assert not (tmp_path / 'out').exists()
+
+
+@pytest.mark.parametrize('extra, message', [
+    (['--workers', '0'], '--workers must be at least 1'),
+    (['--workers', '2', '--scheduler', 'tcp://127.0.0.1:1'], '--workers sets the local'),
+])
+def test_bad_arguments(sweep_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture,
+                       extra: list[str], message: str) -> None:
+    assert main(['sweep', str(sweep_file), '--out', str(tmp_path / 'out'), *extra]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_malformed_sweep_fails_before_anything_runs(
+        sweep_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    sweep_file.write_text(SWEEP.replace('model.d: [30.0, 225.0]', 'model.d: [30.0, -2.0]'))
+    assert main(['sweep', str(sweep_file), '--out', str(tmp_path / 'out')]) == 2
+    assert 'model.d = -2.0: ' in capsys.readouterr().err
+    assert not (tmp_path / 'out').exists()
+
+
+def test_an_unreachable_scheduler_is_named(
+        sweep_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(cluster, 'CONNECT_TIMEOUT', '1s')
+    assert main(['sweep', str(sweep_file), '--out', str(tmp_path / 'out'),
+                 '--scheduler', 'tcp://127.0.0.1:1']) == 2
+    assert 'cannot reach the Dask scheduler at tcp://127.0.0.1:1' in capsys.readouterr().err
+    assert (tmp_path / 'out' / 'sweep.json').exists()  # nothing ran; a re-run resumes
