@@ -286,11 +286,6 @@ SWEEP_INSTALL = ('the sweep runs on Dask, which is not installed; install it wit
 
 def cmd_sweep(args: argparse.Namespace, err: TextIO) -> int:
     """Run a sweep's pending jobs; return 0 if all are done, 1 if some failed."""
-    try:
-        import distributed  # noqa: F401 - the optional dependency, asked for first
-    except ImportError:
-        raise ConeFeederError(SWEEP_INSTALL) from None
-    from .sweep.run import run_sweep
     from .sweep.spec import load_sweep
 
     if args.workers is not None:
@@ -299,7 +294,13 @@ def cmd_sweep(args: argparse.Namespace, err: TextIO) -> int:
                                   'workers (give one or the other)')
         if args.workers < 1:
             raise ConeFeederError(f'--workers must be at least 1, got {args.workers}')
-    sweep = load_sweep(args.sweep)
+    sweep = load_sweep(args.sweep)  # a sweep file is checked without Dask too
+    try:
+        from .sweep.run import run_sweep
+    except ImportError as exc:
+        if exc.name not in ('dask', 'distributed'):
+            raise
+        raise ConeFeederError(SWEEP_INSTALL) from None
 
     def log(line: str) -> None:
         err.write(line + '\n')

@@ -30,9 +30,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / 'cone_feeder_sim'
 RANK = {'errors': 0, '__init__': 0, 'physics': 1, 'weigher': 1, 'feeder': 2, 'formats': 3,
         'ros': 4, 'report': 4, 'sweep': 4, 'cli': 5}
 SIDE_BY_SIDE = ('ros', 'report', 'sweep')
-#: The optional dependency of the sweep: imported by its Dask modules only (and the cli's
-#: check that it is installed).
-DASK_MODULES = {'sweep/cluster.py', 'sweep/run.py', 'cli.py'}
+#: The optional dependency of the sweep: imported by its Dask modules only.
+DASK_MODULES = {'sweep/cluster.py', 'sweep/run.py'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs', 'geometry_msgs',
                 'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'builtin_interfaces'}  # ament_index_python: an optional look-up of files

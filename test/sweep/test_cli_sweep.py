@@ -19,7 +19,6 @@ from pathlib import Path
 import sys
 
 from cone_feeder_sim.cli import main
-from cone_feeder_sim.sweep import cluster
 import pytest
 
 SWEEP = """\
@@ -68,6 +67,8 @@ def test_a_malformed_sweep_fails_before_anything_runs(
 def test_an_unreachable_scheduler_is_named(
         sweep_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture,
         monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip('distributed', reason='the optional extra cone_feeder_sim[sweep]')
+    from cone_feeder_sim.sweep import cluster
     monkeypatch.setattr(cluster, 'CONNECT_TIMEOUT', '1s')
     assert main(['sweep', str(sweep_file), '--out', str(tmp_path / 'out'),
                  '--scheduler', 'tcp://127.0.0.1:1']) == 2
