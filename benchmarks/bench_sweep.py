@@ -40,6 +40,8 @@ import json
 import math
 import os
 from pathlib import Path
+import subprocess
+import sys
 import tempfile
 import time
 
@@ -86,6 +88,19 @@ def serial(sweep: Sweep, tmp: Path) -> float:
     return time.perf_counter() - start
 
 
+def serial_processes(sweep: Sweep, tmp: Path) -> float:
+    """Run every job as its own cone-feeder-sim run process; return the wall time (s)."""
+    command = str(Path(sys.executable).parent / 'cone-feeder-sim')
+    start = time.perf_counter()
+    for job in sweep.jobs:
+        directory = tmp / job.name
+        directory.mkdir(parents=True)
+        scenario = write_job_files(job, directory)
+        subprocess.run([command, 'run', str(scenario), '--events', str(directory / 'e.csv'),
+                        '--quiet'], check=True, capture_output=True)
+    return time.perf_counter() - start
+
+
 def swept(sweep: Sweep, out: Path, workers: int | None) -> tuple[float, float]:
     """Run the sweep into ``out``; return the wall time and the jobs' summed CPU time (s)."""
     start = time.perf_counter()
@@ -102,6 +117,8 @@ def main() -> None:
     parser.add_argument('--jobs', type=int, default=16)
     parser.add_argument('--rounds', type=int, default=2)
     parser.add_argument('--workers', type=int, default=None)
+    parser.add_argument('--processes', action='store_true',
+                        help='also time the serial runs as one process per job (round 0)')
     parser.add_argument('--stretch', type=float, nargs='+', default=[1.0, 4.0],
                         help='job lengths: the scenario time stretched by these factors')
     parser.add_argument('--states', nargs='+', default=['contact', 'alone'],
@@ -122,6 +139,10 @@ def main() -> None:
                     print(f'{state:8s} x{stretch:<4g} round {r}: serial {serial_s:6.2f} s, sweep '
                           f'{sweep_s:6.2f} s (jobs {cpu_s:6.2f} s CPU), sweep/serial '
                           f'{sweep_s / serial_s:.2f}', flush=True)
+                    if args.processes and r == 0:
+                        alone = serial_processes(sweep, base / 'processes')
+                        print(f'{"":8s} {"":5s} serial as {len(sweep.jobs)} processes '
+                              f'{alone:6.2f} s: sweep/serial {sweep_s / alone:.2f}', flush=True)
     print(calibration_line())
 
 

@@ -191,3 +191,10 @@ def test_every_job_scenario_validates_as_a_file(tmp_path: Path) -> None:
     result = sweep(tmp_path, grid={'rotation': [[[0.0, 1.0]], [[0.0, -1.0], [1.0, 2.0]]]})
     for job in result.jobs:
         scenario_from_mapping(yaml.safe_load(job.scenario))
+
+
+def test_the_example_sweep_file_expands() -> None:
+    example = Path(__file__).resolve().parents[2] / 'config' / 'sweep_example.yaml'
+    result = load_sweep(example)
+    assert result.keys == ('particles.0.d', 'model.mu_C', 'weigher.seed')
+    assert len(result.jobs) == 36
