@@ -306,7 +306,9 @@ def cmd_sweep(args: argparse.Namespace, err: TextIO) -> int:
         err.write(line + '\n')
         err.flush()
 
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)  # as Ctrl-C
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = (signal.signal(signal.SIGTERM, signal.default_int_handler)  # as Ctrl-C
+                if main_thread else None)
     try:
         report = run_sweep(sweep, args.out, scheduler=args.scheduler, workers=args.workers,
                            retry_failed=args.retry_failed, log=log)
@@ -315,7 +317,8 @@ def cmd_sweep(args: argparse.Namespace, err: TextIO) -> int:
                   'same command again to run the others\n')
         return 128 + signal.SIGINT
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
     figure = f', figure {report.figure}' if report.figure else ''
     err.write(f'{report.done} of {report.jobs} jobs done, {report.failed} failed '
               f'({report.ran} run now, {report.skipped} finished before); summary '

@@ -63,7 +63,9 @@ class JobOutcome:
     traceback); metrics: the summary values (:data:`METRICS`, ``mass_chNN`` in kg per
     channel; times in s; NaN where undefined, e.g. the mean exit time without exits; the
     weigher's only with a weigher); files: file name -> bytes (events CSV, packs CSV);
-    cpu_s: the CPU time of the job's thread; wall_s; worker: host:pid of the worker.
+    cpu_s: the CPU time of the worker process during the job (numba's threads included;
+    the job's own with one job per process, as a sweep runs them); wall_s; worker:
+    host:pid of the worker.
     """
 
     name: str
@@ -109,7 +111,7 @@ def write_job_files(job: Job, directory: Path) -> Path:
 
 def run_job(job: Job) -> JobOutcome:
     """Run one job on one thread (numba's too) and return its outcome; never raises."""
-    wall, cpu = time.perf_counter(), time.thread_time()
+    wall, cpu = time.perf_counter(), time.process_time()
     worker = f'{socket.gethostname()}:{os.getpid()}'
     set_threads(1)  # numba's thread count is per thread: this job's thread
     tmp = tempfile.mkdtemp(prefix=f'cone-feeder-sim-job-{job.name}-')
@@ -128,8 +130,8 @@ def run_job(job: Job) -> JobOutcome:
         return JobOutcome(name=job.name, digest=job.digest, status='failed',
                           error=f'{type(exc).__name__}: {exc}'.replace(tmp, f'jobs/{job.name}'),
                           traceback=traceback.format_exc(),
-                          cpu_s=time.thread_time() - cpu, wall_s=time.perf_counter() - wall,
+                          cpu_s=time.process_time() - cpu, wall_s=time.perf_counter() - wall,
                           worker=worker)
     return JobOutcome(name=job.name, digest=job.digest, status='done', metrics=metrics,
-                      files=content, cpu_s=time.thread_time() - cpu,
+                      files=content, cpu_s=time.process_time() - cpu,
                       wall_s=time.perf_counter() - wall, worker=worker)

@@ -106,7 +106,7 @@ class SweepStore:
                     'format': FORMAT, 'source': sweep.source, 'digest': sweep.digest,
                     'keys': list(sweep.keys),
                     'jobs': [{'job': j.name, 'digest': j.digest, 'values': dict(j.values)}
-                             for j in sweep.jobs]}, indent=1).encode())
+                             for j in sweep.jobs]}, indent=1, default=str).encode())
         except OSError as exc:
             raise SweepError(f'cannot write the sweep to {self.out}: {exc}') from exc
 
