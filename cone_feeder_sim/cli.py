@@ -306,16 +306,22 @@ def cmd_sweep(args: argparse.Namespace, err: TextIO) -> int:
         err.write(line + '\n')
         err.flush()
 
+    caught: list[int] = []
+
+    def interrupt(signum: int, frame: FrameType | None) -> None:
+        caught.append(signum)
+        raise KeyboardInterrupt  # as Ctrl-C: the sweep closes its cluster and keeps its jobs
+
     main_thread = threading.current_thread() is threading.main_thread()
-    previous = (signal.signal(signal.SIGTERM, signal.default_int_handler)  # as Ctrl-C
-                if main_thread else None)
+    previous = signal.signal(signal.SIGTERM, interrupt) if main_thread else None
     try:
         report = run_sweep(sweep, args.out, scheduler=args.scheduler, workers=args.workers,
                            retry_failed=args.retry_failed, log=log)
     except KeyboardInterrupt:
-        err.write(f'interrupted: the finished jobs are in {args.out} (summary.csv); run the '
-                  'same command again to run the others\n')
-        return 128 + signal.SIGINT
+        signum = caught[0] if caught else signal.SIGINT
+        err.write(f'interrupted by {signal.Signals(signum).name}: the finished jobs are in '
+                  f'{args.out} (summary.csv); run the same command again to run the others\n')
+        return 128 + signum
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)

@@ -29,31 +29,49 @@ joins. Dask retries the job of a worker that dies on another one (up to
 
 import asyncio
 from collections.abc import Callable, Iterable, Iterator
+import concurrent.futures
 import contextlib
 import logging
 import os
+import signal
+import threading
 
-import dask
 from distributed import as_completed, Client, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 
-from .job import JobOutcome, run_job
+from .job import JobOutcome, load_kernels, run_job
 from .spec import Job
 from ..errors import SweepError
-from ..physics.simulation import warm_up
 
 #: How long to try reaching a scheduler before giving up.
 CONNECT_TIMEOUT = '30s'
 
 
 class KernelLoader(WorkerPlugin):
-    """Load (or compile) the integration kernels on a worker when it joins, once."""
+    """Load (or compile) the cone's and the weigher's kernels on a worker when it joins."""
 
     name = 'cone-feeder-sim-kernels'
 
     async def setup(self, worker: object) -> None:
         """Load the kernels beside the worker's event loop (a compile can take a minute)."""
-        await asyncio.to_thread(warm_up)
+        await asyncio.to_thread(load_kernels)
+
+
+class IgnoreInterrupt(WorkerPlugin):
+    """
+    Make a local worker process ignore SIGINT: Ctrl-C is the client's to handle.
+
+    A terminal sends Ctrl-C to the whole process group, the LocalCluster's worker processes
+    included; the client then closes the cluster in order (cancelling the jobs), instead of
+    every worker dying with a traceback of its own. Only for the workers of a LocalCluster.
+    """
+
+    name = 'cone-feeder-sim-ignore-interrupt'
+
+    def setup(self, worker: object) -> None:
+        """Ignore SIGINT in this process (the worker's event loop runs in its main thread)."""
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def available_cores() -> int:
@@ -79,6 +97,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
                 dashboard_address=None, silence_logs=logging.ERROR,
                 env={'NUMBA_NUM_THREADS': '1'}))
             client = stack.enter_context(Client(cluster))
+            client.register_plugin(IgnoreInterrupt())
         else:
             try:
                 client = stack.enter_context(Client(scheduler, timeout=CONNECT_TIMEOUT))
@@ -105,7 +124,8 @@ def run_jobs(client: Client, jobs: Iterable[Job],
             job = futures.pop(future)
             try:
                 outcome = future.result()
-            except Exception as exc:  # noqa: B902 - KilledWorker, a worker's import error...
+            except (Exception, asyncio.CancelledError,  # noqa: B902 - KilledWorker, ...
+                    concurrent.futures.CancelledError) as exc:
                 outcome = JobOutcome(name=job.name, digest=job.digest, status='failed',
                                      error=_task_error(exc))
             future.release()
@@ -115,9 +135,24 @@ def run_jobs(client: Client, jobs: Iterable[Job],
             client.cancel(list(futures))
 
 
-def _task_error(exc: Exception) -> str:
+def _task_error(exc: BaseException) -> str:
     if type(exc).__name__ == 'KilledWorker':
-        allowed = dask.config.get('distributed.scheduler.allowed-failures')
-        return (f'KilledWorker: the workers running it died {allowed + 1} times '
-                f'(distributed.scheduler.allowed-failures = {allowed}): {exc}')
+        return ('KilledWorker: the workers running it died more often than the scheduler '
+                f'allows (its distributed.scheduler.allowed-failures): {exc}')
     return f'{type(exc).__name__}: {exc}'
+
+
+def cluster_notes(client: Client) -> list[str]:
+    """Return what to say about a cluster: its workers, and those that do not fit a sweep."""
+    info = client.scheduler_info()
+    workers = info.get('workers', {})
+    notes = [f'Dask scheduler {info.get("address")}: {len(workers)} workers']
+    if not workers:
+        notes.append('the scheduler has no workers yet: the jobs wait for them (Ctrl-C to '
+                     'stop)')
+    threaded = sorted(addr for addr, w in workers.items() if w.get('nthreads', 1) > 1)
+    if threaded:
+        notes.append(f'warning: {len(threaded)} workers have more than one thread (e.g. '
+                     f'{threaded[0]}); start them with --nthreads 1: jobs beside each other '
+                     "share one process's CPU time and numba's thread pool")
+    return notes

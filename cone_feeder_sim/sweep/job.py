@@ -31,11 +31,14 @@ import os
 from pathlib import Path
 import shutil
 import socket
+import sys
 import tempfile
 import time
 import traceback
 from typing import Any
 
+import numba
+from numba.core.registry import CPUDispatcher
 import numpy as np
 
 from .spec import Job, PARAMETERS_NAME
@@ -44,6 +47,8 @@ from ..feeder.scenario import Scenario
 from ..formats.run_files import run_to_files
 from ..formats.scenario_file import load_scenario
 from ..physics.integrator import set_threads
+from ..physics.simulation import warm_up
+from ..weigher.combination import select_combination
 
 SCENARIO_NAME = 'scenario.yaml'
 EVENTS_NAME = 'events.csv'
@@ -65,7 +70,8 @@ class JobOutcome:
     weigher's only with a weigher); files: file name -> bytes (events CSV, packs CSV);
     cpu_s: the CPU time of the worker process during the job (numba's threads included;
     the job's own with one job per process, as a sweep runs them); wall_s; worker:
-    host:pid of the worker.
+    host:pid of the worker; kernel_loads: compiled kernels the job had to load (0 where
+    the worker loaded them when it joined).
     """
 
     name: str
@@ -78,6 +84,26 @@ class JobOutcome:
     cpu_s: float = 0.0
     wall_s: float = 0.0
     worker: str = ''
+    kernel_loads: int = 0
+
+
+def kernel_loads() -> int:
+    """Return how many compiled kernels this process has loaded or compiled (numba's count)."""
+    total = 0
+    for name, module in list(sys.modules.items()):
+        if not name.startswith('cone_feeder_sim.') or module is None:
+            continue
+        for obj in vars(module).values():
+            if isinstance(obj, CPUDispatcher):
+                total += sum(obj.stats.cache_hits.values()) + sum(
+                    obj.stats.cache_misses.values())
+    return total
+
+
+def load_kernels() -> None:
+    """Load (or compile) every compiled kernel a job may call: the cone's and the weigher's."""
+    warm_up()
+    select_combination([0.2, 0.3, 0.25], 0.45)
 
 
 def job_metrics(scenario: Scenario, result: RunResult) -> dict[str, Any]:
@@ -102,8 +128,7 @@ def job_metrics(scenario: Scenario, result: RunResult) -> dict[str, Any]:
 
 def write_job_files(job: Job, directory: Path) -> Path:
     """Write the job's scenario (and parameter file) into ``directory``; return the scenario."""
-    if job.parameters is not None:
-        (directory / PARAMETERS_NAME).write_text(job.parameters, encoding='utf-8')
+    (directory / PARAMETERS_NAME).write_text(job.parameters, encoding='utf-8')
     path = directory / SCENARIO_NAME
     path.write_text(job.scenario, encoding='utf-8')
     return path
@@ -112,12 +137,14 @@ def write_job_files(job: Job, directory: Path) -> Path:
 def run_job(job: Job) -> JobOutcome:
     """Run one job on one thread (numba's too) and return its outcome; never raises."""
     wall, cpu = time.perf_counter(), time.process_time()
+    loads = kernel_loads()
     worker = f'{socket.gethostname()}:{os.getpid()}'
-    set_threads(1)  # numba's thread count is per thread: this job's thread
     tmp = tempfile.mkdtemp(prefix=f'cone-feeder-sim-job-{job.name}-')
     try:  # error messages name the job's directory of the sweep, not the temporary one
         with contextlib.ExitStack() as cleanup:
             cleanup.callback(shutil.rmtree, tmp, ignore_errors=True)
+            cleanup.callback(numba.set_num_threads, numba.get_num_threads())
+            set_threads(1)  # numba's thread count is per thread: this job's thread
             directory = Path(tmp)
             scenario = load_scenario(write_job_files(job, directory))
             packs = directory / PACKS_NAME if scenario.weigher is not None else None
@@ -131,7 +158,8 @@ def run_job(job: Job) -> JobOutcome:
                           error=f'{type(exc).__name__}: {exc}'.replace(tmp, f'jobs/{job.name}'),
                           traceback=traceback.format_exc(),
                           cpu_s=time.process_time() - cpu, wall_s=time.perf_counter() - wall,
-                          worker=worker)
+                          worker=worker, kernel_loads=kernel_loads() - loads)
     return JobOutcome(name=job.name, digest=job.digest, status='done', metrics=metrics,
                       files=content, cpu_s=time.process_time() - cpu,
-                      wall_s=time.perf_counter() - wall, worker=worker)
+                      wall_s=time.perf_counter() - wall, worker=worker,
+                      kernel_loads=kernel_loads() - loads)

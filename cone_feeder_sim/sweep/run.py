@@ -27,7 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .cluster import dask_client, run_jobs
+from .cluster import cluster_notes, dask_client, run_jobs
 from .figure import write_figure
 from .job import JobOutcome
 from .spec import Job, Sweep
@@ -80,9 +80,8 @@ def run_sweep(sweep: Sweep, out: str | Path, *, scheduler: str | None = None,
     try:
         if todo:
             with dask_client(scheduler, workers) as client:
-                info = client.scheduler_info()
-                log(f'Dask scheduler {info.get("address", scheduler)}: '
-                    f'{len(info.get("workers", {}))} workers')
+                for note in cluster_notes(client):
+                    log(note)
                 run_jobs(client, todo, save)
         interrupted = False
     finally:

@@ -32,14 +32,16 @@ A sweep is a YAML mapping::
 
 A dotted key names a scenario key (``duration``, ``model.d``, ``interactions.enabled``,
 ``weigher.target``, ``solver.rtol``), going into lists by index (``rotation.1.1``,
-``particles.2.position``). A key of a section the base scenario leaves out adds it (so
-``weigher.target`` adds a weigher). One job is one parameter point and seed: grid point ×
-random sample × seed, in that order (the last varies fastest).
+``particles.2.position``); not ``parameters``, the file every job carries. A key of a
+section the base scenario leaves out adds it (so ``weigher.target`` adds a weigher). One
+job is one parameter point and seed: grid point × random sample × seed, in that order
+(the last varies fastest).
 
 Malformed sweeps fail here, naming the key: every value of every key is tried on the base
 scenario alone, then every job's whole scenario is validated. A job's scenario is YAML text
-that ``cone-feeder-sim run`` reads as it is; the parameter file it names travels with it as
-text (``parameters.yaml`` beside it), so that a job runs the same on any worker.
+that ``cone-feeder-sim run`` reads as it is; its parameter file (the one the base scenario
+names, else the package's default) travels with it as text (``parameters.yaml`` beside
+it), so that a job runs the same on any worker.
 """
 
 from collections.abc import Mapping, Sequence
@@ -56,7 +58,8 @@ import numpy as np
 import yaml
 
 from ..errors import ConeFeederError, SweepError
-from ..formats.parameter_file import read_yaml
+from ..formats.parameter_file import (
+    config_dir, DEFAULT_PARAMETER_FILE, DEFAULT_WEIGHER_FILE, read_yaml)
 from ..formats.scenario_file import scenario_from_mapping, SCENARIO_KEYS
 
 SWEEP_KEYS = ('scenario', 'grid', 'random', 'seeds')
@@ -77,16 +80,17 @@ class Job:
     One run of a sweep: a parameter point and seed, as a scenario ready to run.
 
     name: the job's name (its index, zero-padded: ``00003``); values: the value of every
-    varied key at this job (``seed`` too when the sweep has seeds); scenario: the YAML text
-    of the scenario; parameters: the text of the parameter file it names (as
-    ``parameters.yaml``), or None; digest: SHA-256 of both texts (what the job computes).
+    varied key at this job (``weigher.seed`` too when the sweep has seeds); scenario: the
+    YAML text of the scenario; parameters: the text of its parameter file (``parameters:
+    parameters.yaml``: the base scenario's, or the package's default); digest: SHA-256 of
+    both texts and of the package's default weigher file (what the job computes).
     """
 
     index: int
     name: str
     values: Mapping[str, Any]
     scenario: str
-    parameters: str | None
+    parameters: str
     digest: str
 
 
@@ -155,6 +159,9 @@ def set_dotted(root: Any, key: str, value: Any) -> Any:
 def _check_key(key: Any, where: str) -> str:
     if not isinstance(key, str) or not key:
         raise SweepError(f'{where}: keys must be dotted scenario keys, got {key!r}')
+    if key.split('.')[0] == 'parameters':
+        raise SweepError(f'{where}: {key} cannot be varied (a job carries one parameter '
+                         'file); vary its values instead, as model.<key>')
     return key
 
 
@@ -287,11 +294,13 @@ class _Base:
             raise SweepError(f'{where} must be a scenario file name or a scenario mapping')
         self.where = where
         self.mapping = dict(content)
-        self.parameters: Path | None = None
+        # the parameter file, the package's default one where the scenario names none, so
+        # that every job carries the file it runs with (and its digest covers it)
+        self.parameters = config_dir() / DEFAULT_PARAMETER_FILE
         if self.mapping.get('parameters') is not None:
             path = Path(str(self.mapping['parameters']))
             self.parameters = path if path.is_absolute() else base_dir / path
-            self.mapping['parameters'] = str(self.parameters)
+        self.mapping['parameters'] = str(self.parameters)
         self.validate(self.mapping, where)
 
     def validate(self, mapping: Any, where: str) -> None:
@@ -350,12 +359,12 @@ def sweep_from_mapping(content: Any, sweep_dir: Path, source: str = '') -> Sweep
         for value in tried:
             base.validate(set_dotted(base.mapping, key, _plain(value)),
                           f'{key} = {value!r}')
-    parameters = None
-    if base.parameters is not None:
-        try:
-            parameters = base.parameters.read_text(encoding='utf-8')
-        except OSError as exc:
-            raise SweepError(f'scenario: cannot read {base.parameters}: {exc}') from exc
+    try:
+        parameters = base.parameters.read_text(encoding='utf-8')
+        # the default weigher is the installed file's: its text is part of every digest
+        weigher = (config_dir() / DEFAULT_WEIGHER_FILE).read_text(encoding='utf-8')
+    except OSError as exc:
+        raise SweepError(f'cannot read a configuration file: {exc}') from exc
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
     jobs = []
     for values in ({**point, **sample, **({} if seed is None else {SEED_KEY: seed})}
@@ -367,10 +376,9 @@ def sweep_from_mapping(content: Any, sweep_dir: Path, source: str = '') -> Sweep
         index = len(jobs)
         point = ', '.join(f'{k} = {v!r}' for k, v in values.items())
         base.validate(mapping, f'job {index} ({point})')
-        if parameters is not None:
-            mapping['parameters'] = PARAMETERS_NAME
+        mapping['parameters'] = PARAMETERS_NAME
         text = _text(mapping)
-        digest = hashlib.sha256((text + '\0' + (parameters or '')).encode()).hexdigest()
+        digest = hashlib.sha256('\0'.join((text, parameters, weigher)).encode()).hexdigest()
         jobs.append((index, values, text, digest))
     width = max(5, len(str(len(jobs) - 1)))
     named = tuple(Job(index=i, name=f'{i:0{width}d}', values=values, scenario=text,

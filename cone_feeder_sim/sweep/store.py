@@ -100,13 +100,14 @@ class SweepStore:
             raise SweepError(f'{self.out} exists and is not the directory of a sweep; give '
                              'a new or empty directory to --out')
         try:
-            (self.out / JOBS_DIR).mkdir(parents=True, exist_ok=True)
-            if not manifest.exists():
+            self.out.mkdir(parents=True, exist_ok=True)
+            if not manifest.exists():  # first, so that the directory is a sweep's at once
                 _atomic_write(manifest, json.dumps({
                     'format': FORMAT, 'source': sweep.source, 'digest': sweep.digest,
                     'keys': list(sweep.keys),
                     'jobs': [{'job': j.name, 'digest': j.digest, 'values': dict(j.values)}
                              for j in sweep.jobs]}, indent=1, default=str).encode())
+            (self.out / JOBS_DIR).mkdir(exist_ok=True)
         except OSError as exc:
             raise SweepError(f'cannot write the sweep to {self.out}: {exc}') from exc
 
@@ -147,7 +148,8 @@ class SweepStore:
                 'error': outcome.error, 'traceback': outcome.traceback,
                 'metrics': {k: _json_value(v) for k, v in outcome.metrics.items()},
                 'files': sorted(outcome.files), 'cpu_s': outcome.cpu_s,
-                'wall_s': outcome.wall_s, 'worker': outcome.worker}
+                'wall_s': outcome.wall_s, 'worker': outcome.worker,
+                'kernel_loads': outcome.kernel_loads}
             _atomic_write(directory / RESULT_FILE, json.dumps(result, indent=1).encode())
         except OSError as exc:
             raise SweepError(f'cannot write the results of job {job.name} to {directory}: '

@@ -41,6 +41,8 @@ def test_without_dask_it_says_how_to_install_it(
         sweep_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture) -> None:
     monkeypatch.setitem(sys.modules, 'distributed', None)  # import distributed fails
+    for name in ('cone_feeder_sim.sweep.run', 'cone_feeder_sim.sweep.cluster'):
+        monkeypatch.delitem(sys.modules, name, raising=False)  # imported again, and fail
     assert main(['sweep', str(sweep_file), '--out', str(tmp_path / 'out')]) == 2
     assert "pip install 'cone_feeder_sim[sweep]'" in capsys.readouterr().err
     assert not (tmp_path / 'out').exists()

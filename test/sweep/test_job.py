@@ -91,3 +91,10 @@ def test_a_job_that_raises_is_a_failed_outcome(jobs, monkeypatch: pytest.MonkeyP
     assert outcome.status == 'failed'
     assert outcome.error == 'RuntimeError: the disk is on fire'
     assert 'boom' in outcome.traceback
+
+
+def test_a_job_leaves_the_thread_count_of_its_thread(jobs) -> None:
+    import numba
+    before = numba.get_num_threads()
+    run_job(jobs[0])
+    assert numba.get_num_threads() == before

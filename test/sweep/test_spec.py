@@ -18,7 +18,7 @@
 from pathlib import Path
 
 from cone_feeder_sim.errors import SweepError
-from cone_feeder_sim.formats.scenario_file import load_scenario, scenario_from_mapping
+from cone_feeder_sim.formats.scenario_file import load_scenario
 from cone_feeder_sim.sweep.job import write_job_files
 from cone_feeder_sim.sweep.spec import load_sweep, set_dotted, sweep_from_mapping
 import numpy as np
@@ -187,10 +187,18 @@ def test_a_missing_scenario_file_is_named(tmp_path: Path) -> None:
         load_sweep(path)
 
 
-def test_every_job_scenario_validates_as_a_file(tmp_path: Path) -> None:
+def test_a_whole_table_is_a_value(tmp_path: Path) -> None:
     result = sweep(tmp_path, grid={'rotation': [[[0.0, 1.0]], [[0.0, -1.0], [1.0, 2.0]]]})
-    for job in result.jobs:
-        scenario_from_mapping(yaml.safe_load(job.scenario))
+    omega = [scenario_of(job, tmp_path).rotation.omega(2.0) for job in result.jobs]
+    assert omega == [1.0, 2.0]
+
+
+def test_the_default_parameter_file_travels_too(tmp_path: Path) -> None:
+    job = sweep(tmp_path, grid={'duration': [1.0]}).jobs[0]
+    table2 = Path(__file__).resolve().parents[2] / 'config' / 'table2.yaml'
+    assert job.parameters == table2.read_text()
+    with pytest.raises(SweepError, match='parameters cannot be varied'):
+        sweep(tmp_path, grid={'parameters': ['a.yaml']})
 
 
 def test_the_example_sweep_file_expands() -> None:
