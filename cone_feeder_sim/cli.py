@@ -175,7 +175,7 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument('--dpi', type=float, default=100.0,
                         help='resolution; the page is 17 x 9.6 inches (default 100)')
     sub.add_parser(
-        'compile', help='compile the integration kernel into the numba cache (run once '
+        'compile', help='compile the integration and weigher kernels into the numba cache (run once '
                         'after installing, so that no start has to)')
     sweep = sub.add_parser(
         'sweep', help='run a scenario many times with other parameters and seeds, on Dask '
@@ -270,8 +270,10 @@ def cmd_report(args: argparse.Namespace, err: TextIO) -> int:
 def cmd_compile(err: TextIO) -> int:
     """Compile or load the kernel (numba's cache); say where it is and how long it took."""
     from .physics.integrator import advance_batch
+    from .weigher.combination import warm_up as warm_up_weigher
     start = time.perf_counter()
     warm_up()
+    warm_up_weigher()
     seconds = time.perf_counter() - start
     stats = advance_batch.stats
     how = 'loaded from the cache' if stats.cache_hits and not stats.cache_misses else 'compiled'

@@ -70,6 +70,7 @@ from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
     add_particles, advance, as_points, check_positions, ExitEvents, Failure, SimParams, SimState,
     StepStats, warm_up, world_from_cone)
+from ..weigher.combination import warm_up as warm_up_weigher
 from ..weigher.machine import check_machine, Pack, Weigher, WeigherParams, WeigherStats
 
 __all__ = [
@@ -444,7 +445,9 @@ class FeederEngine:
         self._index = 0
         self._state = SimState()
         self._channel_mass = np.zeros(config.model.channels.count)
-        warm_up()  # the kernel is loaded now, never inside a tick
+        warm_up()  # the kernels are loaded now, never inside a tick
+        if config.weigher is not None:
+            warm_up_weigher()
         self._start(0.0)
 
     def _start(self, t: float) -> None:

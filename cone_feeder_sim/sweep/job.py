@@ -48,7 +48,7 @@ from ..formats.run_files import run_to_files
 from ..formats.scenario_file import load_scenario
 from ..physics.integrator import set_threads
 from ..physics.simulation import warm_up
-from ..weigher.combination import select_combination
+from ..weigher.combination import warm_up as warm_up_weigher
 
 SCENARIO_NAME = 'scenario.yaml'
 EVENTS_NAME = 'events.csv'
@@ -103,7 +103,7 @@ def kernel_loads() -> int:
 def load_kernels() -> None:
     """Load (or compile) every compiled kernel a job may call: the cone's and the weigher's."""
     warm_up()
-    select_combination([0.2, 0.3, 0.25], 0.45)
+    warm_up_weigher()
 
 
 def job_metrics(scenario: Scenario, result: RunResult) -> dict[str, Any]:
