@@ -175,8 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument('--dpi', type=float, default=100.0,
                         help='resolution; the page is 17 x 9.6 inches (default 100)')
     sub.add_parser(
-        'compile', help='compile the integration and weigher kernels into the numba cache (run once '
-                        'after installing, so that no start has to)')
+        'compile', help='compile the integration and weigher kernels into the numba cache '
+                        '(run once after installing, so that no start has to)')
     sweep = sub.add_parser(
         'sweep', help='run a scenario many times with other parameters and seeds, on Dask '
                       '(pip install cone_feeder_sim[sweep])')
