@@ -292,7 +292,6 @@ class _Base:
             where, base_dir = f'scenario ({path})', path.parent
         if not isinstance(content, Mapping):
             raise SweepError(f'{where} must be a scenario file name or a scenario mapping')
-        self.where = where
         self.mapping = dict(content)
         # the parameter file, the package's default one where the scenario names none, so
         # that every job carries the file it runs with (and its digest covers it)
@@ -366,23 +365,21 @@ def sweep_from_mapping(content: Any, sweep_dir: Path, source: str = '') -> Sweep
     except OSError as exc:
         raise SweepError(f'cannot read a configuration file: {exc}') from exc
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
+    all_values = [{**point, **sample, **({} if seed is None else {SEED_KEY: seed})}
+                  for point in points for sample in samples
+                  for seed in (seeds if seeds is not None else [None])]
+    width = max(5, len(str(len(all_values) - 1)))
     jobs = []
-    for values in ({**point, **sample, **({} if seed is None else {SEED_KEY: seed})}
-                   for point in points for sample in samples
-                   for seed in (seeds if seeds is not None else [None])):
+    for index, values in enumerate(all_values):
         mapping = base.mapping
         for key, value in values.items():
             mapping = set_dotted(mapping, key, _plain(value))
-        index = len(jobs)
         point = ', '.join(f'{k} = {v!r}' for k, v in values.items())
         base.validate(mapping, f'job {index} ({point})')
         mapping['parameters'] = PARAMETERS_NAME
         text = _text(mapping)
         digest = hashlib.sha256('\0'.join((text, parameters, weigher)).encode()).hexdigest()
-        jobs.append((index, values, text, digest))
-    width = max(5, len(str(len(jobs) - 1)))
-    named = tuple(Job(index=i, name=f'{i:0{width}d}', values=values, scenario=text,
-                      parameters=parameters, digest=digest)
-                  for i, values, text, digest in jobs)
-    digest = hashlib.sha256(''.join(j.digest for j in named).encode()).hexdigest()
-    return Sweep(source=source, keys=tuple(keys), jobs=named, digest=digest)
+        jobs.append(Job(index=index, name=f'{index:0{width}d}', values=values, scenario=text,
+                        parameters=parameters, digest=digest))
+    digest = hashlib.sha256(''.join(j.digest for j in jobs).encode()).hexdigest()
+    return Sweep(source=source, keys=tuple(keys), jobs=tuple(jobs), digest=digest)
