@@ -33,7 +33,7 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 __all__ = ['band_factor', 'band_order', 'band_solve']
 
-jit = numba.njit(cache=True, error_model='numpy')
+jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
 
 @jit

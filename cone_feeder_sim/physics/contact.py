@@ -56,7 +56,7 @@ from .params import (
 __all__ = ['Collision', 'COLLISION_FORCE_FRACTION', 'head_on_collision', 'pair_force',
            'pair_force_py', 'PAIR_DISTANCE_FLOOR']
 
-jit = numba.njit(cache=True, fastmath=False, error_model='numpy')
+jit = numba.njit(cache=True, fastmath=False, error_model='numpy', nogil=True)
 
 #: Centre distances below this (m) are taken as this (the direction of n stays defined).
 PAIR_DISTANCE_FLOOR = 1.0e-9

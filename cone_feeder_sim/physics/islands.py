@@ -51,7 +51,7 @@ from .rosenbrock import (
 
 __all__ = ['advance_island', 'islands_of']
 
-jit = numba.njit(cache=True, error_model='numpy')
+jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
 #: Relative step of the central differences of the pair forces' Jacobian.
 FD_STEP = 1.0e-7

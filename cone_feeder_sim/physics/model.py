@@ -43,7 +43,7 @@ from .params import (
     G_EPS, G_G, G_H, G_K, G_LITERAL, G_TANGENTIAL, G_TIP_EPS, P_C_S, P_D, P_M, P_MU_C, P_QDOT_F,
     P_R_C, P_R_D, P_R_F, P_R_T, P_T_F, P_V_C, P_V_S)
 
-jit = numba.njit(cache=True, fastmath=False, error_model='numpy')
+jit = numba.njit(cache=True, fastmath=False, error_model='numpy', nogil=True)
 
 STATE_SIZE = 9
 

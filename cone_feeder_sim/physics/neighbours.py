@@ -35,7 +35,7 @@ import numpy as np
 
 __all__ = ['contact_pairs', 'contact_pairs_brute']
 
-jit = numba.njit(cache=True, error_model='numpy')
+jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
 
 @jit

@@ -146,7 +146,11 @@ SOLVER_LIMITS: dict[str, Limit] = {
 INTERACTION_LIMITS: dict[str, Limit] = {
     'pull_off': Limit(0.0, 1.0e3, 'N'),
     'max_island': Limit(2, 10 ** 6, 'pieces'),
+    'coupling_tolerance': Limit(0.0, 1.0e-2, 'm', lo_open=True),
 }
+
+#: How pieces that touch are integrated (InteractionParams.coupling).
+COUPLING_CHOICES = ('multirate', 'exact')
 
 NORMAL_FORCE_CHOICES = ('newton', 'literal')
 FRICTION_DIRECTION_CHOICES = ('full', 'tangential')
@@ -296,17 +300,22 @@ class InteractionParams:
     paper's model); pull_off (N): amplitude of the adhesion between two pieces, the force
     that holds two just-touching pieces together. The default 0.05 N is an assumption (the
     paper gives no value): raw meat sticks to meat weakly, about 4 % of the weight of a
-    default 0.125-kg piece. max_island: the largest contact island integrated as one
-    system; a larger one is cut, in its band order, into parts of at most this many pieces,
-    and the pairs between parts are left out for that interval (counted in
-    ``StepStats.pairs_left_out``). The default 48 keeps a crowded live cone responsive; an
-    island's cost grows with its size (doc/model.md, "Large islands"); raise it for exact
-    coupling of any crowd.
+    default 0.125-kg piece. coupling: 'multirate' (default: each piece keeps its own steps,
+    the pair forces are coupled over intervals whose impulse error is held within
+    coupling_tolerance, :mod:`coupling`; no pair is ever left out) or 'exact' (contact
+    islands integrated as one system, :mod:`islands`: the reference). coupling_tolerance
+    (m/s): the largest error of the velocity a pair's impulse gives a piece over one
+    coupling interval. max_island (exact coupling only): the largest contact island
+    integrated as one system; a larger one is cut, in its band order, into parts of at most
+    this many pieces, and the pairs between parts are left out for that interval (counted
+    in ``StepStats.pairs_left_out``); raise it for exact coupling of any crowd.
     """
 
     enabled: bool = False
     pull_off: float = 0.05
     max_island: int = 48
+    coupling: str = 'exact'
+    coupling_tolerance: float = 1.0e-6
 
     def __post_init__(self) -> None:
         """Validate the fields."""
@@ -318,6 +327,10 @@ class InteractionParams:
             'interactions.pull_off', self.pull_off, INTERACTION_LIMITS['pull_off']))
         object.__setattr__(self, 'max_island', check_integer(
             'interactions.max_island', self.max_island, INTERACTION_LIMITS['max_island']))
+        check_choice('interactions.coupling', self.coupling, COUPLING_CHOICES)
+        object.__setattr__(self, 'coupling_tolerance', check_number(
+            'interactions.coupling_tolerance', self.coupling_tolerance,
+            INTERACTION_LIMITS['coupling_tolerance']))
 
 
 # Layout of the global (machine and model) array used by the kernel.
@@ -382,7 +395,7 @@ class ModelParams:
 
 
 #: Keys of the ``interactions`` mapping of parameter files and scenarios.
-INTERACTION_KEYS = ('enabled', 'pull_off', 'max_island')
+INTERACTION_KEYS = ('enabled', 'pull_off', 'max_island', 'coupling', 'coupling_tolerance')
 
 
 def interaction_params_from_mapping(mapping: Any,

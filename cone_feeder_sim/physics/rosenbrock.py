@@ -33,7 +33,7 @@ import numpy as np
 
 from .model import jacobian, rhs, rhs_omega_derivative
 
-jit = numba.njit(cache=True, error_model='numpy')
+jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
 GAMMA = 0.25
 C2, C3, C4 = 0.386, 0.21, 0.63
@@ -228,6 +228,19 @@ def solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, kk, r):
 
 
 @jit
+def add_load(load, rate, dt, f):
+    """
+    Add the acceleration load + rate dt to the velocity rows of f (9,).
+
+    load (3,) (m/s^2) at the step's start, rate (3,) (m/s^3) its time derivative, dt (s) the
+    time since the step's start.
+    """
+    f[3] += load[0] + rate[0] * dt
+    f[4] += load[1] + rate[1] * dt
+    f[5] += load[2] + rate[2] * dt
+
+
+@jit
 def prepare_step(y0, omega0, domega, product, machine, work, k):
     """
     Evaluate what a step from y0 needs, whatever its size.
@@ -245,9 +258,15 @@ def prepare_step(y0, omega0, domega, product, machine, work, k):
 
 
 @jit
-def rodas_step(y0, f0, h, omega0, domega, product, machine, work, piv, k, y1):
+def rodas_step(y0, f0, h, omega0, domega, product, machine, load, rate, work, piv, k,
+               y1):
     """
     Take one RODAS4 step of size h from y0 (f0 = rhs at y0) and write the result into y1.
+
+    load (3,) (m/s^2) is an acceleration added to the velocity rows of the field at the
+    step's start, changing at rate (3,) (m/s^3) (the pair forces of the multirate coupling,
+    :mod:`coupling`; zeros for a piece alone); f0 must include it, and the time derivative
+    k[7] its rate.
 
     :func:`prepare_step` must have been called for y0 first. The cone's angular velocity is
     omega0 + domega * (t - t0) during the step (the step must not cross a breakpoint of the
@@ -277,6 +296,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, work, piv, k, y1):
     for i in range(n):
         ys[i] = y0[i] + A21 * k[0, i]
     rhs(ys, product, machine, omega0 + domega * C2 * h, domega, f)
+    add_load(load, rate, C2 * h, f)
     for i in range(n):
         k[1, i] = f[i] + h * D2 * ft[i] + C21 * k[0, i] / h
     solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 1)
@@ -284,6 +304,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, work, piv, k, y1):
     for i in range(n):
         ys[i] = y0[i] + A31 * k[0, i] + A32 * k[1, i]
     rhs(ys, product, machine, omega0 + domega * C3 * h, domega, f)
+    add_load(load, rate, C3 * h, f)
     for i in range(n):
         k[2, i] = f[i] + h * D3 * ft[i] + (C31 * k[0, i] + C32 * k[1, i]) / h
     solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 2)
@@ -291,6 +312,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, work, piv, k, y1):
     for i in range(n):
         ys[i] = y0[i] + A41 * k[0, i] + A42 * k[1, i] + A43 * k[2, i]
     rhs(ys, product, machine, omega0 + domega * C4 * h, domega, f)
+    add_load(load, rate, C4 * h, f)
     for i in range(n):
         k[3, i] = (f[i] + h * D4 * ft[i]
                    + (C41 * k[0, i] + C42 * k[1, i] + C43 * k[2, i]) / h)
@@ -300,6 +322,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, work, piv, k, y1):
         ys[i] = y0[i] + A51 * k[0, i] + A52 * k[1, i] + A53 * k[2, i] + A54 * k[3, i]
     omega1 = omega0 + domega * h
     rhs(ys, product, machine, omega1, domega, f)
+    add_load(load, rate, h, f)
     for i in range(n):
         k[4, i] = f[i] + (C51 * k[0, i] + C52 * k[1, i] + C53 * k[2, i]
                           + C54 * k[3, i]) / h
@@ -308,6 +331,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, work, piv, k, y1):
     for i in range(n):
         ys[i] += k[4, i]
     rhs(ys, product, machine, omega1, domega, f)
+    add_load(load, rate, h, f)
     for i in range(n):
         k[5, i] = f[i] + (C61 * k[0, i] + C62 * k[1, i] + C63 * k[2, i] + C64 * k[3, i]
                           + C65 * k[4, i]) / h

@@ -31,6 +31,8 @@ import math
 import numpy as np
 
 from .band import band_order
+from .coupling import (
+    advance_coupled, COUPLING_STAT_WIDTH, CST_ACCEPTED, CST_FORCED, CST_REJECTED)
 from .integrator import (
     ACTIVE, advance_batch, EXITED, FAILED, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW,
     REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED, STAT_WIDTH)
@@ -76,7 +78,9 @@ class SimState:
 
     t (s); angle (rad) the cone angle phi(t); y (N, 9) [x (m), w (m/s), P (N)] in cone axes;
     products (N, PRODUCT_WIDTH) product rows; ids (N,) int64 unique particle ids;
-    step_size (N,) proposed next step sizes (s); next_id the id the next new particle gets.
+    step_size (N,) proposed next step sizes (s); next_id the id the next new particle gets;
+    coupling_step (s) the proposed next coupling interval of pieces that touch (multirate
+    coupling; 0: none yet, the solver's h_init).
     """
 
     t: float = 0.0
@@ -86,6 +90,7 @@ class SimState:
     ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     step_size: np.ndarray = field(default_factory=lambda: np.zeros(0))
     next_id: int = 0
+    coupling_step: float = 0.0
 
     @property
     def count(self) -> int:
@@ -143,7 +148,10 @@ class StepStats:
     contact), before any cut. An island takes the steps its most demanding piece needs, so
     this is what makes a crowded interval expensive. pairs_left_out: pairs within reach
     that were left out because their island was larger than
-    ``InteractionParams.max_island`` and was cut into parts.
+    ``InteractionParams.max_island`` and was cut into parts (exact coupling only).
+    coupling_intervals, coupling_rejected: the multirate coupling's accepted and rejected
+    intervals; coupling_forced: intervals accepted at the shortest interval although their
+    error estimate was above the tolerance (:mod:`coupling`).
     """
 
     accepted: int
@@ -151,6 +159,9 @@ class StepStats:
     particles: int
     largest_island: int = 0
     pairs_left_out: int = 0
+    coupling_intervals: int = 0
+    coupling_rejected: int = 0
+    coupling_forced: int = 0
 
 
 @dataclass(frozen=True)
@@ -315,7 +326,13 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     solver = params.solver
     interactions = params.model.interactions
     largest_island = left_out = 0
-    if interactions.enabled and n > 1:
+    coupling_step = state.coupling_step
+    counters = np.zeros(COUPLING_STAT_WIDTH, dtype=np.int64)
+    if interactions.enabled and n > 1 and interactions.coupling == 'multirate':
+        largest_island, coupling_step = _advance_multirate(state, params, profile, t1, y,
+                                                           step_size, status, t_event, stats,
+                                                           counters)
+    elif interactions.enabled and n > 1:
         largest_island, left_out = _advance_with_contacts(state, params, profile, t1, y,
                                                           step_size, status, t_event, stats)
     elif n:
@@ -330,10 +347,13 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     keep = status == ACTIVE
     new_state = replace(state, t=float(t1), angle=state.angle + profile.integral(state.t, t1),
                         y=y[keep], products=state.products[keep], ids=state.ids[keep],
-                        step_size=step_size[keep])
+                        step_size=step_size[keep], coupling_step=coupling_step)
     step_stats = StepStats(accepted=int(stats[:, STAT_ACCEPTED].sum()),
                            rejected=int(stats[:, STAT_REJECTED].sum()), particles=n,
-                           largest_island=largest_island, pairs_left_out=left_out)
+                           largest_island=largest_island, pairs_left_out=left_out,
+                           coupling_intervals=int(counters[CST_ACCEPTED]),
+                           coupling_rejected=int(counters[CST_REJECTED]),
+                           coupling_forced=int(counters[CST_FORCED]))
     return StepResult(state=new_state, exits=exits, failures=failures, stats=step_stats)
 
 
@@ -356,12 +376,76 @@ def contact_reach(products: np.ndarray) -> np.ndarray:
     return 0.5 * (s0 + s_c) + tail * (s0 - s_c)
 
 
+def _pairs_within_reach(state: SimState, params: SimParams, t1: float,
+                        y: np.ndarray) -> np.ndarray:
+    """
+    Return the pairs (M, 2) within reach over the interval state.t .. t1.
+
+    The reach is widened by how far the pieces can move in the interval: their speed
+    relative to the cone, and a fall from rest.
+    """
+    dt = t1 - state.t
+    speed = np.linalg.norm(y[:, 3:6], axis=1)
+    reach = (contact_reach(state.products) + speed * dt
+             + 0.5 * params.model.g * dt * dt)
+    return contact_pairs(y[:, 0:3], reach)
+
+
+def _advance_multirate(state: SimState, params: SimParams, profile: RotationProfile,
+                       t1: float, y: np.ndarray, step_size: np.ndarray, status: np.ndarray,
+                       t_event: np.ndarray, stats: np.ndarray,
+                       counters: np.ndarray) -> tuple[int, float]:
+    """
+    Advance with piece-piece contact by multirate coupling (:mod:`coupling`).
+
+    Pieces in no pair are advanced alone, as without contact; all pieces in pairs are
+    coupled, every pair within reach, whatever the size of the crowd. Returns the largest
+    contact island (pieces) and the proposed next coupling interval (s). Arguments as in
+    :func:`advance`'s arrays, updated in place; counters (COUPLING_STAT_WIDTH,).
+    """
+    solver = params.solver
+    machine = params.global_row
+    pairs = _pairs_within_reach(state, params, t1, y)
+    islands = islands_of(state.count, pairs)
+    largest = max((len(members) for members, _ in islands), default=0)
+    seg_t, seg_omega, seg_domega = profile.segments(state.t, t1)
+    coupled = np.zeros(state.count, dtype=bool)
+    coupled[pairs.reshape(-1)] = True
+    single = np.flatnonzero(~coupled)
+    if single.size:
+        ys, hs, st, te = (y[single], step_size[single], status[single], t_event[single])
+        ss = stats[single]
+        advance_batch(ys, state.products[single], machine, seg_t, seg_omega, seg_domega,
+                      params.model.r, hs, st, te, solver.rtol, params.atol, solver.h_min,
+                      solver.h_max, solver.h_init, solver.max_steps, ss)
+        y[single], step_size[single], status[single], t_event[single] = ys, hs, st, te
+        stats[single] = ss
+    h_coupling = state.coupling_step or solver.h_init
+    members = np.flatnonzero(coupled)
+    if not members.size:
+        return largest, h_coupling
+    local = np.empty(state.count, dtype=np.int64)
+    local[members] = np.arange(members.size)
+    ys, hs, st, te = (np.ascontiguousarray(y[members]), step_size[members], status[members],
+                      t_event[members])
+    ss = np.ascontiguousarray(stats[members])
+    interactions = params.model.interactions
+    h_coupling = advance_coupled(
+        ys, np.ascontiguousarray(state.products[members]), local[pairs], machine, seg_t,
+        seg_omega, seg_domega, params.model.r, hs, st, te, solver.rtol, params.atol,
+        solver.h_min, solver.h_max, solver.h_init, solver.max_steps, ss, interactions.pull_off,
+        h_coupling, interactions.coupling_tolerance, counters)
+    y[members], step_size[members], status[members], t_event[members] = ys, hs, st, te
+    stats[members] = ss
+    return largest, float(h_coupling)
+
+
 def _advance_with_contacts(state: SimState, params: SimParams, profile: RotationProfile,
                            t1: float, y: np.ndarray, step_size: np.ndarray,
                            status: np.ndarray, t_event: np.ndarray,
                            stats: np.ndarray) -> tuple[int, int]:
     """
-    Advance with piece-piece contact: pieces alone as always, contact islands as one system.
+    Advance with piece-piece contact, exactly: contact islands integrated as one system.
 
     Returns the number of pieces in the largest island and the pairs left out (islands
     larger than ``max_island`` are cut by :func:`cut_island`).
@@ -373,11 +457,7 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
     """
     solver = params.solver
     machine = params.global_row
-    dt = t1 - state.t
-    speed = np.linalg.norm(y[:, 3:6], axis=1)
-    reach = (contact_reach(state.products) + speed * dt
-             + 0.5 * params.model.g * dt * dt)
-    pairs = contact_pairs(y[:, 0:3], reach)
+    pairs = _pairs_within_reach(state, params, t1, y)
     islands = islands_of(state.count, pairs)
     largest = max((len(members) for members, _ in islands), default=0)
     limit = params.model.interactions.max_island
@@ -579,10 +659,12 @@ def warm_up() -> None:
     start = (x, 0.0, resting_height(model, model.product, x, 0.0))
     state, _ = add_particles(SimState(), params, [start], None, None, omega=0.0)
     advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
-    # the contact kernels (neighbour search, islands) with two touching pieces
-    touching = replace(params.model, interactions=replace(params.model.interactions,
-                                                          enabled=True))
-    params = SimParams(model=touching, solver=params.solver)
+    # the contact kernels (neighbour search, multirate coupling, islands) with two touching
+    # pieces
     other = (x + 0.04, 0.0, resting_height(model, model.product, x + 0.04, 0.0))
-    state, _ = add_particles(SimState(), params, [start, other], None, None, omega=0.0)
-    advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
+    for coupling in ('multirate', 'exact'):
+        touching = replace(model, interactions=replace(model.interactions, enabled=True,
+                                                       coupling=coupling))
+        params = SimParams(model=touching, solver=params.solver)
+        state, _ = add_particles(SimState(), params, [start, other], None, None, omega=0.0)
+        advance(state, params, RotationProfile.constant(1.0), 1.0e-3)

@@ -37,7 +37,7 @@ __all__ = ['MAX_SUBSETS', 'select_combination', 'subset_count']
 #: Most subsets one call enumerates (about 0.2 s compiled).
 MAX_SUBSETS = 1 << 24
 
-jit = numba.njit(cache=True, error_model='numpy')
+jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
 
 @jit
