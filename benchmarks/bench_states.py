@@ -31,11 +31,14 @@ pieces) and the median and longest tick. The states:
 Pieces start at seeded random places with rho in [0.03, 0.15] m. With ``--interactions``
 every row is measured twice, side by side: pieces alone (the paper's model) and pieces that
 touch (contact islands), both from places where no two pieces overlap (a lattice, in
-layers when one is not enough), with the cost ratio and the largest island. The
-calibration workload is printed first. Example::
+layers when one is not enough), with the cost ratio and the largest island; ``--coupling``
+picks how touching pieces are integrated (``exact``, the default, or ``multirate``, which
+adds its coupling intervals per simulated second). The calibration workload is printed
+first. Example::
 
     .venv/bin/python benchmarks/bench_states.py --pieces 20 150 2000 5000
     .venv/bin/python benchmarks/bench_states.py --pieces 150 1000 --interactions
+    .venv/bin/python benchmarks/bench_states.py --pieces 54 --interactions --coupling multirate
 """
 
 import argparse
@@ -91,10 +94,12 @@ EXACT = 10 ** 6
 
 
 def engine_for(state: str, count: int, contacts: bool, packed: bool,
-               max_island: int = EXACT) -> tuple[FeederEngine, int, int]:
+               max_island: int = EXACT,
+               coupling: str = 'exact') -> tuple[FeederEngine, int, int]:
     """Return the engine in ``state`` with ``count`` pieces, warm-up and measured ticks."""
     model = ModelParams(interactions=InteractionParams(enabled=contacts,
-                                                       max_island=max_island))
+                                                       max_island=max_island,
+                                                       coupling=coupling))
     if state == 'reversing':
         feed = FeedParams(rate=max(500.0, count), max_pieces=count)
         engine = FeederEngine(EngineConfig(model=model, drive=DriveParams(pattern=PATTERN),
@@ -112,12 +117,12 @@ def engine_for(state: str, count: int, contacts: bool, packed: bool,
 
 
 def measure(state: str, count: int, contacts: bool = False, packed: bool = False,
-            max_island: int = EXACT) -> dict[str, float]:
+            max_island: int = EXACT, coupling: str = 'exact') -> dict[str, float]:
     """Run one state with ``count`` pieces; return the figures."""
-    engine, warm, ticks = engine_for(state, count, contacts, packed, max_island)
+    engine, warm, ticks = engine_for(state, count, contacts, packed, max_island, coupling)
     for _ in range(warm):
         engine.tick()
-    durations, piece_seconds, steps, island, cut = [], 0.0, 0, 0, 0
+    durations, piece_seconds, steps, island, cut, intervals = [], 0.0, 0, 0, 0, 0
     cpu0 = time.process_time()
     wall0 = time.perf_counter()
     for _ in range(ticks):
@@ -129,12 +134,13 @@ def measure(state: str, count: int, contacts: bool = False, packed: bool = False
         steps += result.stats.accepted + result.stats.rejected
         island = max(island, result.stats.largest_island)
         cut = max(cut, result.stats.pairs_left_out)
+        intervals += result.stats.coupling_intervals + result.stats.coupling_rejected
     wall = time.perf_counter() - wall0
     cpu = time.process_time() - cpu0
     return {'pieces': engine.piece_count, 'per_cpu': piece_seconds / cpu,
             'steps': steps / max(piece_seconds, 1e-12), 'capacity': ticks * engine.dt / wall,
             'median_ms': 1e3 * statistics.median(durations), 'max_ms': 1e3 * max(durations),
-            'island': island, 'cut': cut}
+            'island': island, 'cut': cut, 'intervals': intervals / (ticks * engine.dt)}
 
 
 def main() -> None:
@@ -147,6 +153,8 @@ def main() -> None:
     parser.add_argument('--max-island', type=int, default=EXACT,
                         help='with --interactions: cut islands larger than this (default: '
                              'none is cut, exact coupling)')
+    parser.add_argument('--coupling', choices=('exact', 'multirate'), default='exact',
+                        help='with --interactions: how touching pieces are integrated')
     args = parser.parse_args()
     print(calibration_line())
     if args.interactions:
@@ -168,17 +176,22 @@ def compare(args: argparse.Namespace) -> None:
     """Print each state and count without and with contacts, side by side."""
     print('# pc-s/CPU-s without and with contact between pieces; cost ratio = with / '
           'without per particle-second; island = most pieces in one contact island; '
-          'cut = most pairs left out (islands cut at --max-island)')
+          f'cut = most pairs left out (islands cut at --max-island); coupling {args.coupling}: '
+          'steps = per particle-second alone / with contact, intervals = coupling '
+          'intervals per simulated s (multirate)')
     print(f'{"state":>10} {"N":>6} {"without":>9} {"with":>9} {"ratio":>6} {"capacity":>9} '
-          f'{"max ms":>8} {"island":>9} {"cut":>6}')
+          f'{"max ms":>8} {"island":>9} {"cut":>6} {"steps":>13} {"intervals":>9}')
     for state in args.states:
         for count in args.pieces:
             alone = measure(state, count, False, packed=True)
-            touch = measure(state, count, True, packed=True, max_island=args.max_island)
+            touch = measure(state, count, True, packed=True, max_island=args.max_island,
+                            coupling=args.coupling)
             print(f'{state:>10} {int(touch["pieces"]):>6} {alone["per_cpu"]:>9.0f} '
                   f'{touch["per_cpu"]:>9.0f} {alone["per_cpu"] / touch["per_cpu"]:>6.2f} '
                   f'{touch["capacity"]:>9.2f} {touch["max_ms"]:>8.1f} '
-                  f'{int(touch["island"]):>9} {int(touch["cut"]):>6}', flush=True)
+                  f'{int(touch["island"]):>9} {int(touch["cut"]):>6} '
+                  f'{alone["steps"]:>6.0f}/{touch["steps"]:<6.0f} {touch["intervals"]:>9.0f}',
+                  flush=True)
 
 
 if __name__ == '__main__':

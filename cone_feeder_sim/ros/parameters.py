@@ -42,8 +42,9 @@ from ..formats.parameter_file import config_dir, load_weigher_params
 from ..formats.runlog import DEFAULT_RECORD_PATH, model_parameter_values
 from ..formats.scenario_file import load_scenario
 from ..physics.params import (
-    CHANNEL_KEYS, INTERACTION_LIMITS, InteractionParams, Limit, MODEL_KEYS, MODEL_LIMITS,
-    model_params_from_mapping, ModelParams, PRODUCT_LIMITS, SOLVER_LIMITS, SolverParams)
+    CHANNEL_KEYS, COUPLING_CHOICES, INTERACTION_LIMITS, InteractionParams, Limit, MODEL_KEYS,
+    MODEL_LIMITS, model_params_from_mapping, ModelParams, PRODUCT_LIMITS, SOLVER_LIMITS,
+    SolverParams)
 from ..weigher.machine import WEIGHER_LIMITS, WeigherParams
 
 __all__ = [
@@ -358,6 +359,15 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
                   'and the pairs between them are left out for the tick (WARN on '
                   '/diagnostics); default from the parameter file',
                   limit=INTERACTION_LIMITS['max_island']),
+        ParamSpec('interactions.coupling', model.interactions.coupling, 'how pieces that touch '
+                  "are integrated: 'exact' (contact islands as one system) or 'multirate' "
+                  '(each piece on its own steps, pair forces coupled over controlled '
+                  'intervals, no pair left out); default from the parameter file',
+                  constraints=f'one of {", ".join(COUPLING_CHOICES)}'),
+        ParamSpec('interactions.coupling_tolerance', model.interactions.coupling_tolerance,
+                  'multirate coupling: largest position error (m) one coupling interval may '
+                  'give a piece; default from the parameter file',
+                  limit=INTERACTION_LIMITS['coupling_tolerance']),
     ]
     specs += model_param_specs(model)
     specs += weigher_param_specs()
@@ -427,7 +437,8 @@ def engine_config_from_values(values: dict[str, Any], base: ModelParams) -> Engi
     """Build and validate the whole engine configuration from parameter values."""
     model = replace(model_from_values(values, base), interactions=InteractionParams(
         enabled=values['interactions.enabled'], pull_off=values['interactions.pull_off'],
-        max_island=values['interactions.max_island']))
+        max_island=values['interactions.max_island'], coupling=values['interactions.coupling'],
+        coupling_tolerance=values['interactions.coupling_tolerance']))
     solver = SolverParams(**{name[len('solver.'):]: value for name, value in values.items()
                              if name.startswith('solver.')})
     flat = _array(values['initial_pieces.positions'])

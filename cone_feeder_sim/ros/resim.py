@@ -76,6 +76,9 @@ def load_resim_plan(source: RunSource) -> ResimPlan:
                              f'reads format {FORMAT_VERSION}')
     try:
         parameters = json.loads(meta['parameters_json'])
+        # recordings made before the multirate coupling existed were coupled exactly
+        parameters.setdefault('interactions.coupling', 'exact')
+        parameters.setdefault('interactions.coupling_tolerance', 1.0e-6)
         topics = json.loads(meta['topics'])
         dt_ns = 1e9 / float(parameters['update_rate'])
     except (KeyError, TypeError, ValueError) as err:

@@ -88,8 +88,8 @@ def _fixed_step_error(n: int, t_end: float, omega0: float, domega: float) -> flo
         omega = omega0 + domega * i * h
         model.rhs(y, PP, GP, omega, domega, f0)
         rosenbrock.prepare_step(y, omega, domega, PP, GP, work, k)
-        assert rosenbrock.rodas_step(y, f0, h, omega, domega, PP, GP, NO_LOAD, NO_LOAD, work, piv, k,
-                                     y1)
+        assert rosenbrock.rodas_step(y, f0, h, omega, domega, PP, GP, NO_LOAD, NO_LOAD, work,
+                                     piv, k, y1)
         y = y1.copy()
     return float(np.abs(y[:3] - _free_flight(t_end, omega0, domega)[:3]).max())
 
