@@ -31,11 +31,13 @@ and are taken to turn with the cone, so u = (qdot_i - qdot_j) - omega z x (q_i -
 Coefficients of a pair are the means of the two pieces' values.
 """
 
+import functools
 import math
 from typing import Any
 
 import numpy as np
-from reference_model import omega_of_t, reference_rhs, static_friction
+from reference_model import (
+    initial_state_on_feeder, omega_of_t, reference_rhs, static_friction, table2_params)
 from scipy.integrate import solve_ivp
 
 PAIR_KEYS = ('r_a', 'r_d', 'r_f', 'd', 'mu_C', 'mu_S', 'v_C', 'v_S', 'epsilon')
@@ -166,3 +168,15 @@ def crowd_exits(params: list[dict[str, Any]], y0: np.ndarray, table: Any, t_end:
             exits[i] = (t, math.degrees(math.atan2(y[i][1], y[i][0])) % 360.0)
             alive.remove(i)
     return exits
+
+
+#: The rotation that spins a crowd of touching pieces off the rim in the contact tests.
+RIM_CROWD_TABLE = ((0.0, 0.0), (0.4, -8.0), (5.0, -8.0))
+
+
+@functools.lru_cache(maxsize=None)
+def rim_crowd_exits(positions: tuple[tuple[float, float, float], ...]) -> dict:
+    """Return the reference exits of the rim crowd at ``positions`` (computed once)."""
+    y0 = np.array([initial_state_on_feeder(np.array(x), 0.0) for x in positions])
+    return crowd_exits([table2_params(1)] * len(positions), y0, [list(r) for r in
+                       RIM_CROWD_TABLE], 1.1, pull_off=0.05)

@@ -284,7 +284,7 @@ def off_blocks(jac, alpha, out):
 
 @jit
 def matvec(products, status, start, pair, other, d_mat, off, v, out):
-    """out = M v for the velocity system: diagonal blocks d_mat, pair blocks off / m_p."""
+    """Write M v into out: M the velocity system, blocks d_mat and off / m_p."""
     n = v.shape[0]
     for p in range(n):
         for a in range(3):
@@ -307,7 +307,7 @@ def matvec(products, status, start, pair, other, d_mat, off, v, out):
 
 @jit
 def precondition(d_lu, d_piv, v, out):
-    """out = D^-1 v, D the factored diagonal blocks."""
+    """Write D^-1 v into out, D the factored diagonal blocks."""
     for p in range(v.shape[0]):
         o0, o1, o2 = solve3(d_lu[p], d_piv[p], v[p, 0], v[p, 1], v[p, 2])
         out[p, 0] = o0
@@ -698,4 +698,3 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
         forces[:] = f_end
         begin[:] = plateau
     return h
-

@@ -76,9 +76,6 @@ def load_resim_plan(source: RunSource) -> ResimPlan:
                              f'reads format {FORMAT_VERSION}')
     try:
         parameters = json.loads(meta['parameters_json'])
-        # recordings made before the multirate coupling existed were coupled exactly
-        parameters.setdefault('interactions.coupling', 'exact')
-        parameters.setdefault('interactions.coupling_tolerance', 1.0e-6)
         topics = json.loads(meta['topics'])
         dt_ns = 1e9 / float(parameters['update_rate'])
     except (KeyError, TypeError, ValueError) as err:
@@ -104,6 +101,21 @@ def load_resim_plan(source: RunSource) -> ResimPlan:
     return ResimPlan(recording.path, parameters, meta.get('engine_config', ''), events, ticks,
                      recording.problem)
 
+
+
+#: Parameters that recordings made before they existed lack, with the value those runs had:
+#: they were coupled exactly.
+BEFORE_THEY_EXISTED: dict[str, Any] = {'interactions.coupling': 'exact',
+                                       'interactions.coupling_tolerance': 1.0e-6}
+
+
+def recorded_parameter(plan: ResimPlan, name: str) -> tuple[bool, Any]:
+    """Return (found, value) of parameter ``name`` in a recording, old recordings included."""
+    if name in plan.parameters:
+        return True, plan.parameters[name]
+    if name in BEFORE_THEY_EXISTED:
+        return True, BEFORE_THEY_EXISTED[name]
+    return False, None
 
 def _event(message: RecordedMessage, where: str) -> dict[str, Any]:
     try:

@@ -132,7 +132,7 @@ from .parameters import (
     feed_from_values, init_or_exit, LIVE_PARAMETERS, model_from_values, parameter_specs, ParamSpec,
     warn_unknown_parameters)
 from .qos import rclpy_qos
-from .resim import load_resim_plan, ResimPlan
+from .resim import load_resim_plan, recorded_parameter, ResimPlan
 from .. import __version__
 from ..errors import ConeFeederError, ParameterError
 from ..feeder.engine import (
@@ -328,9 +328,9 @@ class SimNode(GuardedNode):
     def _declare(self, spec: 'ParamSpec') -> Parameter:
         """Declare a parameter; while re-simulating, take recorded values over given ones."""
         plan = self._resim
-        if plan is None or spec.name in LIVE_PARAMETERS or spec.name not in plan.parameters:
+        found, value = (False, None) if plan is None else recorded_parameter(plan, spec.name)
+        if not found or spec.name in LIVE_PARAMETERS:
             return declare(self, spec)
-        value = plan.parameters[spec.name]
         if value is None or value == []:
             value = spec.type_()  # an empty array: declared without a value, as '[]' does
         return declare(self, spec, value, ignore_override=True)

@@ -14,10 +14,6 @@
 
 """The multirate coupling of pieces that touch, against the coupled reference."""
 
-import numba
-import numpy as np
-import pytest
-
 from cone_feeder_sim.errors import ParameterError
 from cone_feeder_sim.physics import (band, contact, coupling, integrator, islands, model,
                                      neighbours, rosenbrock)
@@ -25,7 +21,10 @@ from cone_feeder_sim.physics.params import InteractionParams, ModelParams, Produ
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import resting_height, SimParams, Simulator
 from cone_feeder_sim.weigher import combination
-from reference_contacts import crowd_exits, crowd_trajectory
+import numba
+import numpy as np
+import pytest
+from reference_contacts import crowd_trajectory, rim_crowd_exits
 from reference_model import initial_state_on_feeder, table2_params
 
 STILL = [[0.0, 0.0], [100.0, 0.0]]
@@ -173,8 +172,7 @@ def test_touching_pieces_exit_where_the_coupled_reference_says() -> None:
     positions = resting(m, [[0.15, 0.0], [0.19, 0.02], [0.16, 0.045], [0.12, 0.02],
                             [0.20, -0.025], [0.14, -0.04]])
     _, exits, _ = run(m, TURNING, positions, 1.1)
-    y0 = np.array([initial_state_on_feeder(x, 0.0) for x in positions])
-    reference = crowd_exits([table2_params(1)] * 6, y0, TURNING, 1.1, pull_off=0.05)
+    reference = rim_crowd_exits(tuple(map(tuple, positions.tolist())))
     assert sorted(exits) == sorted(reference) == list(range(6))
     for i in range(6):
         assert abs(exits[i][0] - reference[i][0]) < 2e-3  # s

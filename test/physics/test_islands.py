@@ -23,7 +23,7 @@ from cone_feeder_sim.physics.simulation import (
     contact_reach, resting_height, SimParams, Simulator)
 import numpy as np
 import pytest
-from reference_contacts import crowd_exits, crowd_trajectory
+from reference_contacts import crowd_trajectory, rim_crowd_exits
 from reference_model import initial_state_on_feeder, table2_params
 
 STILL = [[0.0, 0.0], [100.0, 0.0]]
@@ -157,8 +157,7 @@ def crowd_at_the_rim() -> tuple[np.ndarray, dict, dict]:
     positions = resting(m, [[0.15, 0.0], [0.19, 0.02], [0.16, 0.045], [0.12, 0.02],
                             [0.20, -0.025], [0.14, -0.04]])
     _, exits = simulate(m, TURNING, positions, t_end=1.1)
-    y0 = np.array([initial_state_on_feeder(x, 0.0) for x in positions])
-    reference = crowd_exits([table2_params(1)] * 6, y0, TURNING, 1.1, pull_off=0.05)
+    reference = rim_crowd_exits(tuple(map(tuple, positions.tolist())))
     return positions, exits, reference
 
 
