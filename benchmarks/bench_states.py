@@ -94,12 +94,13 @@ EXACT = 10 ** 6
 
 
 def engine_for(state: str, count: int, contacts: bool, packed: bool,
-               max_island: int = EXACT,
-               coupling: str = 'exact') -> tuple[FeederEngine, int, int]:
+               max_island: int = EXACT, coupling: str = 'exact',
+               tolerance: float = 1e-6) -> tuple[FeederEngine, int, int]:
     """Return the engine in ``state`` with ``count`` pieces, warm-up and measured ticks."""
     model = ModelParams(interactions=InteractionParams(enabled=contacts,
                                                        max_island=max_island,
-                                                       coupling=coupling))
+                                                       coupling=coupling,
+                                                       coupling_tolerance=tolerance))
     if state == 'reversing':
         feed = FeedParams(rate=max(500.0, count), max_pieces=count)
         engine = FeederEngine(EngineConfig(model=model, drive=DriveParams(pattern=PATTERN),
@@ -117,9 +118,11 @@ def engine_for(state: str, count: int, contacts: bool, packed: bool,
 
 
 def measure(state: str, count: int, contacts: bool = False, packed: bool = False,
-            max_island: int = EXACT, coupling: str = 'exact') -> dict[str, float]:
+            max_island: int = EXACT, coupling: str = 'exact',
+            tolerance: float = 1e-6) -> dict[str, float]:
     """Run one state with ``count`` pieces; return the figures."""
-    engine, warm, ticks = engine_for(state, count, contacts, packed, max_island, coupling)
+    engine, warm, ticks = engine_for(state, count, contacts, packed, max_island, coupling,
+                                     tolerance)
     for _ in range(warm):
         engine.tick()
     durations, piece_seconds, steps, island, cut, intervals = [], 0.0, 0, 0, 0, 0
@@ -155,6 +158,8 @@ def main() -> None:
                              'none is cut, exact coupling)')
     parser.add_argument('--coupling', choices=('exact', 'multirate'), default='exact',
                         help='with --interactions: how touching pieces are integrated')
+    parser.add_argument('--coupling-tolerance', type=float, default=1e-6,
+                        help='with --coupling multirate: interactions.coupling_tolerance (m)')
     args = parser.parse_args()
     print(calibration_line())
     if args.interactions:
@@ -176,7 +181,8 @@ def compare(args: argparse.Namespace) -> None:
     """Print each state and count without and with contacts, side by side."""
     print('# pc-s/CPU-s without and with contact between pieces; cost ratio = with / '
           'without per particle-second; island = most pieces in one contact island; '
-          f'cut = most pairs left out (islands cut at --max-island); coupling {args.coupling}: '
+          'cut = most pairs left out (islands cut at --max-island); coupling '
+          f'{args.coupling} (tolerance {args.coupling_tolerance:g} m): '
           'steps = per particle-second alone / with contact, intervals = coupling '
           'intervals per simulated s (multirate)')
     print(f'{"state":>10} {"N":>6} {"without":>9} {"with":>9} {"ratio":>6} {"capacity":>9} '
@@ -185,7 +191,7 @@ def compare(args: argparse.Namespace) -> None:
         for count in args.pieces:
             alone = measure(state, count, False, packed=True)
             touch = measure(state, count, True, packed=True, max_island=args.max_island,
-                            coupling=args.coupling)
+                            coupling=args.coupling, tolerance=args.coupling_tolerance)
             print(f'{state:>10} {int(touch["pieces"]):>6} {alone["per_cpu"]:>9.0f} '
                   f'{touch["per_cpu"]:>9.0f} {alone["per_cpu"] / touch["per_cpu"]:>6.2f} '
                   f'{touch["capacity"]:>9.2f} {touch["max_ms"]:>8.1f} '
