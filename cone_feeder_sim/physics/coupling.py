@@ -57,8 +57,7 @@ from .contact import pair_force
 from .integrator import ACTIVE, advance_particle, GROUPS, STAT_REASON
 from .model import jacobian, rhs, STATE_SIZE
 from .params import G_EPS, P_M
-from .rosenbrock import (
-    C_K, C_LOAD, C_RATE, C_REF, C_REF_RATE, COUPLING_ROW, factor3, solve3)
+from .rosenbrock import factor3, solve3
 
 __all__ = ['advance_coupled', 'COUPLING_STAT_WIDTH', 'CST_ACCEPTED', 'CST_FORCED',
            'CST_ITERATIONS', 'CST_REJECTED']
@@ -430,17 +429,18 @@ def sub_segments(seg_t, seg_omega, seg_domega, ta, tb, out_t, out_omega, out_dom
 @pjit
 def advance_pieces(y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t, flat_omega,
                    flat_domega, r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max,
-                   h_kink, max_steps, stats, ramp_rows, flat_rows, kink):
+                   h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load, kink):
     """
     Advance every ACTIVE piece over one interval, in parallel: its ramp, then its plateau.
 
-    ramp_* and flat_* are the sub-segments of the two parts; ramp_rows and flat_rows
-    (n, COUPLING_ROW) the pieces' coupling rows of the two parts (:func:`coupling_rows`). A
-    piece that exits or fails in the ramp stops there.
+    ramp_* and flat_* are the sub-segments of the two parts; ramp_load (n, 3) (m/s^2) the
+    load at the interval's start and ramp_rate (n, 3) (m/s^3) its rate over the ramp;
+    flat_load (n, 3) the plateau. A piece that exits or fails in the ramp stops there.
     """
     n = STATE_SIZE
     count = y.shape[0]
     groups = min(count, GROUPS)
+    none = np.zeros(3)
     for g in numba.prange(groups):
         work = np.empty((2, n, n))
         piv = np.empty((2, 3), dtype=np.int64)
@@ -454,12 +454,13 @@ def advance_pieces(y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t
             st, t_ev, hp = advance_particle(y[p], products[p], machine, ramp_t, ramp_omega,
                                             ramp_domega, r_exit, hp, rtol, atol, h_min, h_max,
                                             h_kink, max_steps, stats[p], work, piv, k, y1, f0,
-                                            ramp_rows[p])
+                                            ramp_load[p], ramp_rate[p])
             if st == ACTIVE:
                 st, t_ev, hp = advance_particle(y[p], products[p], machine, flat_t,
                                                 flat_omega, flat_domega, r_exit, hp, rtol,
                                                 atol, h_min, h_max, h_kink, max_steps,
-                                                stats[p], work, piv, k, y1, f0, flat_rows[p])
+                                                stats[p], work, piv, k, y1, f0, flat_load[p],
+                                                none)
             status[p] = st
             t_event[p] = t_ev
             h_prop[p] = hp
@@ -480,45 +481,20 @@ def shapes(pairs, status, used, begin, ramp, plateau):
 
 
 @pjit
-def coupling_rows(y, delta, products, start, pair, sign, jac, begin, plateau, h, ramp,
-                  ramp_rows, flat_rows):
-    """
-    Write every piece's coupling rows for the ramp and the plateau of an interval of h (s).
-
-    The load (m/s^2) is the sum of the piece's pairs' planned forces over its mass: from
-    begin (m, 3) it ramps over the fraction ramp of the interval to plateau (m, 3). On top,
-    the piece feels its own side of its pairs: K = sum of its pairs' d(F)/d(w_i) over its
-    mass, times its velocity's departure from the predicted path y + (t - t0)/h delta
-    (n, 9), so that its own steps treat the stiff pair terms (damping, friction) implicitly.
-    """
-    for p in numba.prange(y.shape[0]):
+def piece_loads(products, start, pair, sign, begin, plateau, ramp_time, ramp_load, ramp_rate,
+                flat_load):
+    """Sum each piece's pair loads (m/s^2): at the start, their rate in the ramp, plateau."""
+    for p in numba.prange(ramp_load.shape[0]):
         mp = products[p, P_M]
-        ramp_time = ramp * h
-        for a in range(COUPLING_ROW):
-            ramp_rows[p, a] = 0.0
         for a in range(3):
             b0 = 0.0
             b1 = 0.0
             for e in range(start[p], start[p + 1]):
                 b0 += sign[e] * begin[pair[e], a]
                 b1 += sign[e] * plateau[pair[e], a]
-            ramp_rows[p, C_LOAD + a] = b0 / mp
-            ramp_rows[p, C_RATE + a] = (b1 - b0) / (mp * ramp_time)
-            for c in range(3, 6):  # the velocity part: see :func:`settle_cross_terms`
-                acc = 0.0
-                for e in range(start[p], start[p + 1]):
-                    acc += jac[pair[e], a, c]
-                ramp_rows[p, C_K + 6 * a + c] = acc / mp
-        for c in range(6):
-            ramp_rows[p, C_REF + c] = y[p, c]
-            ramp_rows[p, C_REF_RATE + c] = delta[p, c] / h
-        for a in range(COUPLING_ROW):
-            flat_rows[p, a] = ramp_rows[p, a]
-        for a in range(3):
-            flat_rows[p, C_LOAD + a] = ramp_rows[p, C_LOAD + a] + ramp_rows[p, C_RATE + a] * ramp_time
-            flat_rows[p, C_RATE + a] = 0.0
-        for c in range(6):
-            flat_rows[p, C_REF + c] = y[p, c] + ramp * delta[p, c]
+            ramp_load[p, a] = b0 / mp
+            flat_load[p, a] = b1 / mp
+            ramp_rate[p, a] = (b1 - b0) / (mp * ramp_time)
 
 
 @pjit
@@ -537,41 +513,6 @@ def loads_from(y_pred_delta, status, pairs, forces, jac, used):
                 for c in range(6):
                     acc += jac[q, a, c] * (y_pred_delta[i, c] - y_pred_delta[j, c])
             used[q, a] = acc
-
-
-@jit
-def settle_cross_terms(y, y0, delta, products, status, pairs, jac, h, kick):
-    """
-    Give each piece its pairs' response to its partners' departure from their paths.
-
-    Inside the interval, piece i felt d(F)/d(w_i) times its own departure from the predicted
-    path; the pair force also answers its partner j's departure, -G_w times it. That part
-    is given at the interval's end as a change of velocity, from the partner's integral of
-    the departure: (x_j(t1) - x_j(t0)) - h (w_j0 + dw_j / 2), exact. With no force of its
-    own (free flight), a piece's discrete impulse from its own side is exactly G_w times its
-    own integral, so a pair's impulses are equal and opposite to round-off. kick (n, 3).
-    """
-    for p in range(y.shape[0]):
-        kick[p, 0] = kick[p, 1] = kick[p, 2] = 0.0
-    for q in range(pairs.shape[0]):
-        i = pairs[q, 0]
-        j = pairs[q, 1]
-        if status[i] != ACTIVE or status[j] != ACTIVE:
-            continue
-        for a in range(3):
-            on_i = 0.0
-            on_j = 0.0
-            for b in range(3):
-                gone_i = (y[i, b] - y0[i, b]) - h * (y0[i, 3 + b] + 0.5 * delta[i, 3 + b])
-                gone_j = (y[j, b] - y0[j, b]) - h * (y0[j, 3 + b] + 0.5 * delta[j, 3 + b])
-                on_i += jac[q, a, 3 + b] * gone_j
-                on_j += jac[q, a, 3 + b] * gone_i
-            kick[i, a] -= on_i / products[i, P_M]
-            kick[j, a] -= on_j / products[j, P_M]
-    for p in range(y.shape[0]):
-        if status[p] == ACTIVE:
-            for a in range(3):
-                y[p, 3 + a] += kick[p, a]
 
 
 @jit
@@ -647,10 +588,10 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
     delta = np.empty((n, STATE_SIZE))
     begin = np.empty((m, 3))
     plateau = np.empty((m, 3))
-    ramp_rows = np.empty((n, COUPLING_ROW))
-    flat_rows = np.empty((n, COUPLING_ROW))
+    ramp_load = np.empty((n, 3))
+    ramp_rate = np.empty((n, 3))
+    flat_load = np.empty((n, 3))
     scratch = np.empty((7, n, 3))
-    kick = np.empty((n, 3))
     y_save = np.empty_like(y)
     h_save = np.empty_like(h_prop)
     status_save = np.empty_like(status)
@@ -701,8 +642,8 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
         loads_from(delta, status, pairs, forces, jac, used)
         ramp_time = RAMP * hc
         shapes(pairs, status, used, begin, RAMP, plateau)
-        coupling_rows(y, delta, products, start, pair, sign, jac, begin, plateau, hc, RAMP,
-                      ramp_rows, flat_rows)
+        piece_loads(products, start, pair, sign, begin, plateau, ramp_time, ramp_load,
+                    ramp_rate, flat_load)
         # 3. every piece alone, with its load
         y_save[:] = y
         h_save[:] = h_prop
@@ -718,8 +659,7 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
         advance_pieces(y, products, machine, sub_t[:c0 + 1], sub_omega[:c0],
                        sub_domega[:c0], sub2_t[:c1 + 1], sub2_omega[:c1], sub2_domega[:c1],
                        r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max, h_kink,
-                       max_steps, stats, ramp_rows, flat_rows, kink)
-        settle_cross_terms(y, y_save, delta, products, status, pairs, jac, hc, kick)
+                       max_steps, stats, ramp_load, ramp_rate, flat_load, kink)
         # 4. the error of the interval's impulses
         pair_forces(y, products, pairs, status, pull_off, eps, f_end)
         raw_error(products, status, start, pair, other, sign, used, forces, f_end, hc, alpha,

@@ -35,8 +35,7 @@ import numba
 import numpy as np
 
 from .model import rhs, STATE_SIZE
-from .rosenbrock import (
-    add_load, add_load_jacobian, COUPLING_ROW, ERROR_ORDER, prepare_step, rodas_step)
+from .rosenbrock import add_load, ERROR_ORDER, prepare_step, rodas_step
 
 jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
@@ -165,7 +164,8 @@ def locate_exit(h, ya, yb, r_exit):
 
 @jit
 def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, h_prop, rtol,
-                     atol, h_min, h_max, h_kink, max_steps, stats, work, piv, k, y1, f0, c):
+                     atol, h_min, h_max, h_kink, max_steps, stats, work, piv, k, y1, f0, load,
+                     rate):
     """
     Advance one particle through all segments, or until it exits or fails.
 
@@ -174,9 +174,9 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
     h_kink, since the jump excites fast friction transients. No step is longer than h_max:
     a transition from sticking to slipping can start inside a long step without the
     embedded error estimate noticing it. Step sizes follow the
-    predictive (Gustafsson) controller of Hairer and Wanner's RODAS. c (COUPLING_ROW,) adds
-    the pair forces of a coupling interval to the field, with origin seg_t[0]
-    (:func:`rosenbrock.add_load`; zeros for a piece alone).
+    predictive (Gustafsson) controller of Hairer and Wanner's RODAS. load (3,) (m/s^2) is an
+    acceleration added to the field at seg_t[0], changing at rate (3,) (m/s^3) (zeros for
+    a piece alone; the pair forces over a coupling interval, :mod:`coupling`).
     Returns (status, t_end_or_exit, h_prop): status ACTIVE when the interval was completed,
     EXITED with the exit time (y then holds the state at the exit), or FAILED with the time
     reached (y holds the last accepted state; stats[STAT_REASON] tells why).
@@ -184,6 +184,7 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
     n_seg = seg_omega.shape[0]
     steps = 0
     t = seg_t[0]
+    load_now = np.empty(3)
     h_acc = 0.0  # last accepted step and its error, for the predictive controller
     err_acc = 1.0
     for s in range(n_seg):
@@ -202,12 +203,15 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
             omega0 = omega_s + domega * (t - t_seg)
             if fresh:
                 rhs(y, product, machine, omega0, domega, f0)
-                add_load(c, t - seg_t[0], y, f0)
+                for a in range(3):
+                    load_now[a] = load[a] + rate[a] * (t - seg_t[0])
+                add_load(load_now, rate, 0.0, f0)
                 prepare_step(y, omega0, domega, product, machine, work, k)
-                add_load_jacobian(c, work[0], k[7])
+                for a in range(3):
+                    k[7, 3 + a] += rate[a]
                 fresh = False
-            ok = rodas_step(y, f0, h, omega0, domega, product, machine, c, t - seg_t[0],
-                            work, piv, k, y1)
+            ok = rodas_step(y, f0, h, omega0, domega, product, machine, load_now, rate, work,
+                            piv, k, y1)
             err = error_norm(k[5], y, y1, rtol, atol) if ok else np.inf
             steps += 1
             if steps > max_steps:
@@ -226,8 +230,8 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
             if y1[0] * y1[0] + y1[1] * y1[1] >= r_exit * r_exit:
                 theta = locate_exit(h, y, y1, r_exit)
                 h_exit = theta * h
-                ok = rodas_step(y, f0, h_exit, omega0, domega, product, machine, c,
-                                t - seg_t[0], work, piv, k, y1)
+                ok = rodas_step(y, f0, h_exit, omega0, domega, product, machine, load_now,
+                                rate, work, piv, k, y1)
                 if not ok:
                     stats[STAT_REASON] = REASON_NOT_FINITE
                     return FAILED, t, h_prop
@@ -284,14 +288,14 @@ def advance_batch(y, products, machine, seg_t, seg_omega, seg_domega, r_exit, h_
         k = np.empty((n, n))
         y1 = np.empty(n)
         f0 = np.empty(n)
-        alone = np.zeros(COUPLING_ROW)
+        load = np.zeros(3)
         for p in range(g, count, groups):
             if status[p] != ACTIVE:
                 continue
             st, t_ev, hp = advance_particle(y[p], products[p], machine, seg_t, seg_omega,
                                             seg_domega, r_exit, h_prop[p], rtol, atol, h_min,
                                             h_max, h_kink, max_steps, stats[p], work, piv, k,
-                                            y1, f0, alone)
+                                            y1, f0, load, load)
             status[p] = st
             t_event[p] = t_ev
             h_prop[p] = hp

@@ -227,35 +227,17 @@ def solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, kk, r):
     kk[r, 8] = kp2
 
 
-#: Layout of a piece's coupling row (:mod:`coupling`): the load (m/s^2) at the row's
-#: origin, its rate (m/s^3), K (3 x 6, row-major, 1/s^2 and 1/s) the piece's own side of its
-#: pair forces per unit mass, the predicted path's position and velocity at the origin and
-#: their rates. The acceleration added to the field at time tau after the origin is
-#: load + rate tau + K (y[0:6] - ref - ref_rate tau).
-C_LOAD, C_RATE, C_K, C_REF, C_REF_RATE = 0, 3, 6, 24, 30
-COUPLING_ROW = 36
-
-
 @jit
-def add_load(c, tau, y, f):
-    """Add the coupling row c's acceleration at tau (s) after its origin, state y, to f."""
-    for a in range(3):
-        acc = c[C_LOAD + a] + c[C_RATE + a] * tau
-        for b in range(6):
-            acc += c[C_K + 6 * a + b] * (y[b] - c[C_REF + b] - c[C_REF_RATE + b] * tau)
-        f[3 + a] += acc
+def add_load(load, rate, dt, f):
+    """
+    Add the acceleration load + rate dt to the velocity rows of f (9,).
 
-
-@jit
-def add_load_jacobian(c, jac, ft):
-    """Add the coupling row's K to the Jacobian jac (9, 9), and its time derivative to ft."""
-    for a in range(3):
-        acc = c[C_RATE + a]
-        for b in range(6):
-            k = c[C_K + 6 * a + b]
-            jac[3 + a, b] += k
-            acc -= k * c[C_REF_RATE + b]
-        ft[3 + a] += acc
+    load (3,) (m/s^2) at the step's start, rate (3,) (m/s^3) its time derivative, dt (s) the
+    time since the step's start.
+    """
+    f[3] += load[0] + rate[0] * dt
+    f[4] += load[1] + rate[1] * dt
+    f[5] += load[2] + rate[2] * dt
 
 
 @jit
@@ -276,14 +258,15 @@ def prepare_step(y0, omega0, domega, product, machine, work, k):
 
 
 @jit
-def rodas_step(y0, f0, h, omega0, domega, product, machine, c, tau, work, piv, k, y1):
+def rodas_step(y0, f0, h, omega0, domega, product, machine, load, rate, work, piv, k,
+               y1):
     """
     Take one RODAS4 step of size h from y0 (f0 = rhs at y0) and write the result into y1.
 
-    c (COUPLING_ROW,) is the coupling row of the piece (the pair forces of the multirate
-    coupling, :mod:`coupling`; zeros for a piece alone), tau (s) the step's start after
-    the row's origin; f0, the Jacobian and the time derivative k[7] must include it
-    (:func:`add_load`, :func:`add_load_jacobian`).
+    load (3,) (m/s^2) is an acceleration added to the velocity rows of the field at the
+    step's start, changing at rate (3,) (m/s^3) (the pair forces of the multirate coupling,
+    :mod:`coupling`; zeros for a piece alone); f0 must include it, and the time derivative
+    k[7] its rate.
 
     :func:`prepare_step` must have been called for y0 first. The cone's angular velocity is
     omega0 + domega * (t - t0) during the step (the step must not cross a breakpoint of the
@@ -313,7 +296,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, c, tau, work, piv, k
     for i in range(n):
         ys[i] = y0[i] + A21 * k[0, i]
     rhs(ys, product, machine, omega0 + domega * C2 * h, domega, f)
-    add_load(c, tau + C2 * h, ys, f)
+    add_load(load, rate, C2 * h, f)
     for i in range(n):
         k[1, i] = f[i] + h * D2 * ft[i] + C21 * k[0, i] / h
     solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 1)
@@ -321,7 +304,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, c, tau, work, piv, k
     for i in range(n):
         ys[i] = y0[i] + A31 * k[0, i] + A32 * k[1, i]
     rhs(ys, product, machine, omega0 + domega * C3 * h, domega, f)
-    add_load(c, tau + C3 * h, ys, f)
+    add_load(load, rate, C3 * h, f)
     for i in range(n):
         k[2, i] = f[i] + h * D3 * ft[i] + (C31 * k[0, i] + C32 * k[1, i]) / h
     solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 2)
@@ -329,7 +312,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, c, tau, work, piv, k
     for i in range(n):
         ys[i] = y0[i] + A41 * k[0, i] + A42 * k[1, i] + A43 * k[2, i]
     rhs(ys, product, machine, omega0 + domega * C4 * h, domega, f)
-    add_load(c, tau + C4 * h, ys, f)
+    add_load(load, rate, C4 * h, f)
     for i in range(n):
         k[3, i] = (f[i] + h * D4 * ft[i]
                    + (C41 * k[0, i] + C42 * k[1, i] + C43 * k[2, i]) / h)
@@ -339,7 +322,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, c, tau, work, piv, k
         ys[i] = y0[i] + A51 * k[0, i] + A52 * k[1, i] + A53 * k[2, i] + A54 * k[3, i]
     omega1 = omega0 + domega * h
     rhs(ys, product, machine, omega1, domega, f)
-    add_load(c, tau + h, ys, f)
+    add_load(load, rate, h, f)
     for i in range(n):
         k[4, i] = f[i] + (C51 * k[0, i] + C52 * k[1, i] + C53 * k[2, i]
                           + C54 * k[3, i]) / h
@@ -348,7 +331,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, c, tau, work, piv, k
     for i in range(n):
         ys[i] += k[4, i]
     rhs(ys, product, machine, omega1, domega, f)
-    add_load(c, tau + h, ys, f)
+    add_load(load, rate, h, f)
     for i in range(n):
         k[5, i] = f[i] + (C61 * k[0, i] + C62 * k[1, i] + C63 * k[2, i] + C64 * k[3, i]
                           + C65 * k[4, i]) / h

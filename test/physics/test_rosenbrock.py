@@ -24,7 +24,7 @@ import pytest
 
 PP = product_row(ProductParams())
 GP = ModelParams().global_row()
-NO_LOAD = np.zeros(rosenbrock.COUPLING_ROW)  # nothing added to the field (a piece alone)
+NO_LOAD = np.zeros(3)  # no constant acceleration added to the field
 
 
 def test_lu_matches_numpy() -> None:
@@ -88,8 +88,8 @@ def _fixed_step_error(n: int, t_end: float, omega0: float, domega: float) -> flo
         omega = omega0 + domega * i * h
         model.rhs(y, PP, GP, omega, domega, f0)
         rosenbrock.prepare_step(y, omega, domega, PP, GP, work, k)
-        assert rosenbrock.rodas_step(y, f0, h, omega, domega, PP, GP, NO_LOAD, 0.0, work, piv,
-                                     k, y1)
+        assert rosenbrock.rodas_step(y, f0, h, omega, domega, PP, GP, NO_LOAD, NO_LOAD, work,
+                                     piv, k, y1)
         y = y1.copy()
     return float(np.abs(y[:3] - _free_flight(t_end, omega0, domega)[:3]).max())
 
@@ -114,7 +114,7 @@ def test_embedded_error_estimate_is_small_on_exact_polynomial_free_fall() -> Non
     k = np.zeros((9, 9))
     model.rhs(y, PP, GP, 0.0, 0.0, f0)
     rosenbrock.prepare_step(y, 0.0, 0.0, PP, GP, work, k)
-    assert rosenbrock.rodas_step(y, f0, 0.1, 0.0, 0.0, PP, GP, NO_LOAD, 0.0, work, piv, k,
+    assert rosenbrock.rodas_step(y, f0, 0.1, 0.0, 0.0, PP, GP, NO_LOAD, NO_LOAD, work, piv, k,
                                      y1)
     np.testing.assert_allclose(y1[:6], _free_flight(0.1, 0.0, 0.0)[:6], atol=1e-14)
     assert np.abs(k[5]).max() < 1e-13
