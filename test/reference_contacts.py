@@ -174,7 +174,7 @@ def crowd_exits(params: list[dict[str, Any]], y0: np.ndarray, table: Any, t_end:
 RIM_CROWD_TABLE = ((0.0, 0.0), (0.4, -8.0), (5.0, -8.0))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def rim_crowd_exits(positions: tuple[tuple[float, float, float], ...]) -> dict:
     """Return the reference exits of the rim crowd at ``positions`` (computed once)."""
     y0 = np.array([initial_state_on_feeder(np.array(x), 0.0) for x in positions])

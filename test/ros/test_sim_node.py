@@ -29,6 +29,7 @@ from cone_feeder_sim.formats.topics import MessageRecord
 from cone_feeder_sim.physics.params import SolverParams
 from cone_feeder_sim.ros.parameters import parameter_specs
 from cone_feeder_sim.ros.sim_node import SimNode
+from crowds import crowd_in_layers
 from geometry_msgs.msg import PoseArray
 import numpy as np
 import pytest
@@ -505,6 +506,51 @@ def test_the_executor_runs_while_a_tick_does(ros: Ros) -> None:
     sim.engine.tick = tick  # type: ignore[method-assign]
     assert ros.spin_until(lambda: sim.last_tick is not None and sim.last_tick.mode == 'command')
     assert sim.last_tick.target_omega == 3.0
+
+
+def test_the_executor_answers_while_a_real_contact_tick_runs(ros: Ros) -> None:
+    # a crowd dropped in three layers, coupled exactly as one island: its ticks are long
+    # (0.4-2 s measured) and the executor keeps answering services and publishing.
+    # test_engine's GIL test is the one that fails when a kernel holds the GIL; this one
+    # did not fail when the island kernels were compiled without nogil (not understood)
+    from diagnostic_msgs.msg import DiagnosticArray
+    positions = crowd_in_layers().reshape(-1).tolist()
+    sim = ros.sim(**{'feed.rate': 0.0, 'markers.rate': 0.0, 'open_loop_pattern': [],
+                     'start_paused': True, 'initial_pieces.positions': positions,
+                     'initial_pieces.d': [], 'interactions.coupling': 'exact',
+                     'interactions.max_island': 100000, 'diagnostics.period': 0.05})
+    assert sim.engine.piece_count == len(positions) // 3 > 100
+    tick = sim.engine.tick
+    spans: list[tuple[float, float]] = []
+
+    def timed_tick() -> Any:
+        start = time.monotonic()
+        try:
+            return tick()
+        finally:
+            spans.append((start, time.monotonic()))
+
+    sim.engine.tick = timed_tick  # type: ignore[method-assign]
+    heard: list[float] = []
+    ros.client.create_subscription(DiagnosticArray, '/diagnostics',
+                                   lambda _: heard.append(time.monotonic()), 10)
+    name = sim.get_fully_qualified_name()
+    assert ros.call(SetBool, f'{name}/pause', SetBool.Request(data=False)).success
+    answers = []
+    while len(spans) < 4:  # ask again and again (refused: not paused) while it ticks
+        asked = time.monotonic()
+        assert not ros.call(Trigger, f'{name}/step', Trigger.Request()).success
+        answers.append((asked, time.monotonic()))
+    sim.engine.tick = tick  # type: ignore[method-assign]
+
+    def during_a_tick(start: float, end: float) -> bool:
+        return any(s < start and end < e for s, e in spans[1:])
+
+    inside = sorted(b - a for a, b in answers if during_a_tick(a, b))
+    longest_tick = max(e - s for s, e in spans[1:])
+    assert len(inside) >= 3, (len(answers), spans)
+    assert inside[len(inside) // 2] < 2 * sim.engine.dt, (inside, longest_tick)
+    assert any(during_a_tick(t, t) for t in heard), (heard, spans)
 
 
 def test_topics_are_relative_and_described_for_recording(ros: Ros) -> None:
