@@ -55,6 +55,10 @@ jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
 #: Relative step of the central differences of the pair forces' Jacobian.
 FD_STEP = 1.0e-7
+#: Accepted steps an island's Jacobian is kept for (1: every step). RODAS4 needs the exact
+#: Jacobian for its order: kept for 2 or 4 steps, the 54-piece crowds of bench_states took
+#: twice the steps and ran 1.5-2x slower (doc/model.md, "Jacobian reuse"), so it is not kept.
+JACOBIAN_EVERY = 1
 
 
 @jit
@@ -356,6 +360,7 @@ def advance_island(y, products, pairs, pos, kl, machine, seg_t, seg_omega, seg_d
     ft_2 = ft.reshape(n, STATE_SIZE)
     n_seg = seg_omega.shape[0]
     steps = 0
+    age = 0
     t = seg_t[0]
     h_acc = 0.0
     err_acc = 1.0
@@ -376,8 +381,10 @@ def advance_island(y, products, pairs, pos, kl, machine, seg_t, seg_omega, seg_d
             omega0 = omega_s + domega * (t - t_seg)
             if fresh:
                 island_rhs(y, products, pairs, machine, omega0, domega, pull_off, f0_2)
-                island_jacobian(y, products, pairs, machine, omega0, domega, pull_off, own,
-                                pair_jac, xi, wi)
+                if age % JACOBIAN_EVERY == 0:
+                    island_jacobian(y, products, pairs, machine, omega0, domega, pull_off, own,
+                                    pair_jac, xi, wi)
+                age += 1
                 for p in range(n):
                     rhs_omega_derivative(y[p], omega0, ft_2[p])
                 for i in range(size):
@@ -393,6 +400,10 @@ def advance_island(y, products, pairs, pos, kl, machine, seg_t, seg_omega, seg_d
                 return FAILED, t, h_prop, -1
             if not (err <= 1.0):
                 stats[STAT_REJECTED] += 1
+                if age % JACOBIAN_EVERY != 1 % JACOBIAN_EVERY:  # stale: refresh it
+                    island_jacobian(y, products, pairs, machine, omega0, domega, pull_off, own,
+                                    pair_jac, xi, wi)
+                    age = 1
                 h_prop = proposal_after_rejection(h, err, rejected)
                 rejected = True
                 if h_prop < h_min:
