@@ -180,3 +180,17 @@ def rim_crowd_exits(positions: tuple[tuple[float, float, float], ...]) -> dict:
     y0 = np.array([initial_state_on_feeder(np.array(x), 0.0) for x in positions])
     return crowd_exits([table2_params(1)] * len(positions), y0, [list(r) for r in
                        RIM_CROWD_TABLE], 1.1, pull_off=0.05)
+
+
+#: Four touching pieces (x, y in m, resting on the cone) on a cone spun up to -6 rad/s: the
+#: convergence case of the contact tests, compared with the reference at 0.4 s.
+FOUR_TOUCHING_XY = ((0.06, 0.0), (0.105, 0.005), (0.15, 0.0), (0.08, 0.04))
+FOUR_TOUCHING_TABLE = ((0.0, 0.0), (0.3, -6.0), (5.0, -6.0))
+
+
+@functools.cache
+def four_touching_at(positions: tuple[tuple[float, float, float], ...]) -> np.ndarray:
+    """Return the reference positions (4, 3) m at 0.4 s of the four pieces (computed once)."""
+    y0 = np.array([initial_state_on_feeder(np.array(x), 0.0) for x in positions])
+    return crowd_trajectory([table2_params(1)] * 4, y0, [list(r) for r in FOUR_TOUCHING_TABLE],
+                            0.4, pull_off=0.05, t_eval=[0.4]).y[:, -1].reshape(4, 9)[:, :3]

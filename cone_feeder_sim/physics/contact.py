@@ -54,12 +54,14 @@ from .params import (
     P_D, P_MU_C, P_MU_S, P_R_A, P_R_D, P_R_F, P_S0, P_SC_RATIO, P_V_C, P_V_S)
 
 __all__ = ['Collision', 'COLLISION_FORCE_FRACTION', 'head_on_collision', 'pair_force',
-           'pair_force_py', 'PAIR_DISTANCE_FLOOR']
+           'pair_force_py', 'pair_jacobian', 'PAIR_DISTANCE_FLOOR']
 
 jit = numba.njit(cache=True, fastmath=False, error_model='numpy', nogil=True)
 
 #: Centre distances below this (m) are taken as this (the direction of n stays defined).
 PAIR_DISTANCE_FLOOR = 1.0e-9
+#: Relative step of the central differences of :func:`pair_jacobian`.
+FD_STEP = 1.0e-7
 
 
 @jit
@@ -97,6 +99,34 @@ def pair_force(xi, wi, pi, xj, wj, pj, pull_off, epsilon):
                                     v_c, v_s, c_s)
     s = -mag / (v_t + epsilon)
     return along * n0 + s * t0, along * n1 + s * t1, along * n2 + s * t2
+
+
+@jit
+def pair_jacobian(xi, wi, pi, xj, wj, pj, pull_off, epsilon, out, sx, sw):
+    """
+    Write d(F)/d(x_i, w_i) of :func:`pair_force` into out (3, 6), by central differences.
+
+    The force depends on the differences of the two pieces' positions and velocities only,
+    so d(F)/d(x_j, w_j) = -out. sx, sw (3,) are scratch.
+    """
+    for c in range(6):
+        delta = FD_STEP * max(abs(xi[c] if c < 3 else wi[c - 3]), 1e-3 if c < 3 else 1e-2)
+        for m in range(3):
+            sx[m] = xi[m]
+            sw[m] = wi[m]
+        if c < 3:
+            sx[c] += delta
+        else:
+            sw[c - 3] += delta
+        p0, p1, p2 = pair_force(sx, sw, pi, xj, wj, pj, pull_off, epsilon)
+        if c < 3:
+            sx[c] -= 2.0 * delta
+        else:
+            sw[c - 3] -= 2.0 * delta
+        m0, m1, m2 = pair_force(sx, sw, pi, xj, wj, pj, pull_off, epsilon)
+        out[0, c] = (p0 - m0) / (2.0 * delta)
+        out[1, c] = (p1 - m1) / (2.0 * delta)
+        out[2, c] = (p2 - m2) / (2.0 * delta)
 
 
 def pair_force_py(xi: Any, wi: Any, pi: Any, xj: Any, wj: Any, pj: Any,

@@ -53,8 +53,9 @@ import math
 import numba
 import numpy as np
 
-from .contact import pair_force
+from .contact import pair_force, pair_jacobian
 from .integrator import ACTIVE, advance_particle, GROUPS, STAT_REASON
+from .islands import velocity_block
 from .model import jacobian, rhs, STATE_SIZE
 from .params import G_EPS, P_M
 from .rosenbrock import factor3, solve3
@@ -65,8 +66,6 @@ __all__ = ['advance_coupled', 'COUPLING_STAT_WIDTH', 'CST_ACCEPTED', 'CST_FORCED
 jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 pjit = numba.njit(cache=True, error_model='numpy', nogil=True, parallel=True)
 
-#: Relative step of the central differences of the pair forces' Jacobian.
-FD_STEP = 1.0e-7
 #: Relative residual at which the velocity system of the prediction is solved.
 SOLVE_RTOL = 1.0e-10
 #: Most BiCGSTAB iterations; an unsolved system rejects the interval.
@@ -145,8 +144,7 @@ def pair_jacobians(y, products, pairs, status, pull_off, eps, out):
     """
     Write d(F)/d(x_i, w_i) of every pair q = (i, j) into out (m, 3, 6), central differences.
 
-    The force depends on the differences of the two pieces' positions and velocities only,
-    so d(F)/d(x_j, w_j) = -out[q]; inactive pairs get zeros.
+    d(F)/d(x_j, w_j) = -out[q] (:func:`contact.pair_jacobian`); inactive pairs get zeros.
     """
     for q in numba.prange(pairs.shape[0]):
         i = pairs[q, 0]
@@ -156,29 +154,8 @@ def pair_jacobians(y, products, pairs, status, pull_off, eps, out):
                 for c in range(6):
                     out[q, a, c] = 0.0
             continue
-        xi = y[i, 0:3].copy()
-        wi = y[i, 3:6].copy()
-        for c in range(6):
-            delta = FD_STEP * max(abs(y[i, c]), 1e-3 if c < 3 else 1e-2)
-            if c < 3:
-                xi[c] += delta
-            else:
-                wi[c - 3] += delta
-            p0, p1, p2 = pair_force(xi, wi, products[i], y[j, 0:3], y[j, 3:6], products[j],
-                                    pull_off, eps)
-            if c < 3:
-                xi[c] -= 2.0 * delta
-            else:
-                wi[c - 3] -= 2.0 * delta
-            m0, m1, m2 = pair_force(xi, wi, products[i], y[j, 0:3], y[j, 3:6], products[j],
-                                    pull_off, eps)
-            if c < 3:
-                xi[c] = y[i, c]
-            else:
-                wi[c - 3] = y[i, c]
-            out[q, 0, c] = (p0 - m0) / (2.0 * delta)
-            out[q, 1, c] = (p1 - m1) / (2.0 * delta)
-            out[q, 2, c] = (p2 - m2) / (2.0 * delta)
+        pair_jacobian(y[i, 0:3], y[i, 3:6], products[i], y[j, 0:3], y[j, 3:6], products[j],
+                      pull_off, eps, out[q], np.empty(3), np.empty(3))
 
 
 @pjit
@@ -218,28 +195,8 @@ def assemble(y, products, machine, omega, domega, alpha, status, start, pair, si
                 f[p, 3 + a] += sign[e] * forces[q, a] / mp
                 for c in range(6):
                     blk[3 + a, c] += jac[q, a, c] / mp
-        for a in range(3):
-            for b in range(3):
-                s_lu[p, a, b] = -blk[6 + a, 6 + b]
-            s_lu[p, a, a] += alpha
-        factor3(s_lu[p], s_piv[p])
-        for b in range(3):
-            t0, t1, t2 = solve3(s_lu[p], s_piv[p],
-                                blk[6, b] / alpha + blk[6, 3 + b],
-                                blk[7, b] / alpha + blk[7, 3 + b],
-                                blk[8, b] / alpha + blk[8, 3 + b])
-            t_mat[p, 0, b] = t0
-            t_mat[p, 1, b] = t1
-            t_mat[p, 2, b] = t2
-        for a in range(3):
-            for b in range(3):
-                acc = -(blk[3 + a, b] / alpha + blk[3 + a, 3 + b])
-                for c in range(3):
-                    acc -= blk[3 + a, 6 + c] * t_mat[p, c, b]
-                if a == b:
-                    acc += alpha
-                d_mat[p, a, b] = acc
-                d_lu[p, a, b] = acc
+        velocity_block(blk, alpha, s_lu[p], s_piv[p], t_mat[p], d_mat[p])
+        d_lu[p] = d_mat[p]
         factor3(d_lu[p], d_piv[p])
         r0 = f[p, 6] + (blk[6, 0] * f[p, 0] + blk[6, 1] * f[p, 1] + blk[6, 2] * f[p, 2]) / alpha
         r1 = f[p, 7] + (blk[7, 0] * f[p, 0] + blk[7, 1] * f[p, 1] + blk[7, 2] * f[p, 2]) / alpha
@@ -255,22 +212,30 @@ def assemble(y, products, machine, omega, domega, alpha, status, start, pair, si
             rv[p, a] = acc
 
 
+@jit
+def neighbour_sum(p, start, pair, other, blocks, v):
+    """Return sum over piece p's pairs q (partner o) of blocks[q] (3, 3) @ v[o] (3,)."""
+    s0 = s1 = s2 = 0.0
+    for e in range(start[p], start[p + 1]):
+        q = pair[e]
+        o = other[e]
+        s0 += blocks[q, 0, 0] * v[o, 0] + blocks[q, 0, 1] * v[o, 1] + blocks[q, 0, 2] * v[o, 2]
+        s1 += blocks[q, 1, 0] * v[o, 0] + blocks[q, 1, 1] * v[o, 1] + blocks[q, 1, 2] * v[o, 2]
+        s2 += blocks[q, 2, 0] * v[o, 0] + blocks[q, 2, 1] * v[o, 1] + blocks[q, 2, 2] * v[o, 2]
+    return s0, s1, s2
+
+
 @pjit
 def pair_rhs(products, alpha, status, start, pair, other, jac, f, rv):
     """Add the pair terms -G_x f_x(other) / (alpha m_p) to the right-hand side rv (n, 3)."""
-    n = rv.shape[0]
-    for p in numba.prange(n):
+    for p in numba.prange(rv.shape[0]):
         if status[p] != ACTIVE:
             continue
-        mp = products[p, P_M]
-        for e in range(start[p], start[p + 1]):
-            q = pair[e]
-            o = other[e]
-            for a in range(3):
-                acc = 0.0
-                for c in range(3):
-                    acc += jac[q, a, c] * f[o, c]
-                rv[p, a] -= acc / (alpha * mp)
+        s0, s1, s2 = neighbour_sum(p, start, pair, other, jac[:, :, 0:3], f[:, 0:3])
+        scale = 1.0 / (alpha * products[p, P_M])
+        rv[p, 0] -= s0 * scale
+        rv[p, 1] -= s1 * scale
+        rv[p, 2] -= s2 * scale
 
 
 @pjit
@@ -285,24 +250,17 @@ def off_blocks(jac, alpha, out):
 @jit
 def matvec(products, status, start, pair, other, d_mat, off, v, out):
     """Write M v into out: M the velocity system, blocks d_mat and off / m_p."""
-    n = v.shape[0]
-    for p in range(n):
+    for p in range(v.shape[0]):
         for a in range(3):
-            acc = 0.0
-            for b in range(3):
-                acc += d_mat[p, a, b] * v[p, b]
-            out[p, a] = acc
+            out[p, a] = (d_mat[p, a, 0] * v[p, 0] + d_mat[p, a, 1] * v[p, 1]
+                         + d_mat[p, a, 2] * v[p, 2])
         if status[p] != ACTIVE:
             continue
+        s0, s1, s2 = neighbour_sum(p, start, pair, other, off, v)
         mp = products[p, P_M]
-        for e in range(start[p], start[p + 1]):
-            q = pair[e]
-            o = other[e]
-            for a in range(3):
-                acc = 0.0
-                for b in range(3):
-                    acc += off[q, a, b] * v[o, b]
-                out[p, a] += acc / mp
+        out[p, 0] += s0 / mp
+        out[p, 1] += s1 / mp
+        out[p, 2] += s2 / mp
 
 
 @jit

@@ -37,7 +37,7 @@ import numba
 import numpy as np
 
 from .band import band_factor, band_solve
-from .contact import pair_force
+from .contact import pair_force, pair_jacobian
 from .integrator import (
     ACTIVE, after_acceptance, error_norm, EXITED, FAILED, locate_exit,
     proposal_after_rejection, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS,
@@ -49,12 +49,10 @@ from .rosenbrock import (
     C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, factor3,
     GAMMA, solve3)
 
-__all__ = ['advance_island', 'islands_of']
+__all__ = ['advance_island', 'islands_of', 'velocity_block']
 
 jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
-#: Relative step of the central differences of the pair forces' Jacobian.
-FD_STEP = 1.0e-7
 #: Accepted steps an island's Jacobian is kept for (1: every step). RODAS4 needs the exact
 #: Jacobian for its order: kept for 2 or 4 steps, the 54-piece crowds of bench_states took
 #: twice the steps and ran 1.5-2x slower (doc/model.md, "Jacobian reuse"), so it is not kept.
@@ -105,35 +103,47 @@ def island_jacobian(y, products, pairs, machine, omega, domega, pull_off, own, p
         j = pairs[q, 1]
         mi = products[i, P_M]
         mj = products[j, P_M]
-        for c in range(6):  # derivative with respect to component c of (x_i, w_i)
-            delta = FD_STEP * max(abs(y[i, c]), 1e-3 if c < 3 else 1e-2)
-            for m in range(3):
-                xi[m] = y[i, m]
-                wi[m] = y[i, 3 + m]
-            if c < 3:
-                xi[c] += delta
-            else:
-                wi[c - 3] += delta
-            p0, p1, p2 = pair_force(xi, wi, products[i], y[j, 0:3], y[j, 3:6], products[j],
-                                    pull_off, eps)
-            if c < 3:
-                xi[c] -= 2.0 * delta
-            else:
-                wi[c - 3] -= 2.0 * delta
-            m0, m1, m2 = pair_force(xi, wi, products[i], y[j, 0:3], y[j, 3:6], products[j],
-                                    pull_off, eps)
-            g0 = (p0 - m0) / (2.0 * delta)
-            g1 = (p1 - m1) / (2.0 * delta)
-            g2 = (p2 - m2) / (2.0 * delta)
-            pair_jac[q, 0, c] = g0
-            pair_jac[q, 1, c] = g1
-            pair_jac[q, 2, c] = g2
-            own[i, 3, c] += g0 / mi
-            own[i, 4, c] += g1 / mi
-            own[i, 5, c] += g2 / mi
-            own[j, 3, c] += g0 / mj
-            own[j, 4, c] += g1 / mj
-            own[j, 5, c] += g2 / mj
+        pair_jacobian(y[i, 0:3], y[i, 3:6], products[i], y[j, 0:3], y[j, 3:6], products[j],
+                      pull_off, eps, pair_jac[q], xi, wi)
+        for a in range(3):
+            for c in range(6):
+                g = pair_jac[q, a, c]
+                own[i, 3 + a, c] += g / mi
+                own[j, 3 + a, c] += g / mj
+
+
+@jit
+def velocity_block(blk, alpha, s_lu, s_piv, t_mat, out):
+    """
+    Eliminate a piece's filter rows from alpha I - J; write its velocity block into out.
+
+    blk (9, 9) the piece's Jacobian (its pairs' diagonal blocks included); s_lu (3, 3) and
+    s_piv (3,) receive the factored S = alpha I - J_PP, t_mat (3, 3) the
+    T = S^-1 (J_Px/alpha + J_Pw); out (3, 3) = alpha I - J_wP T - (J_wx/alpha + J_ww), the
+    piece's diagonal block of the velocity system (see :func:`island_factor`). Returns False
+    if S is singular.
+    """
+    for a in range(3):
+        for b in range(3):
+            s_lu[a, b] = -blk[6 + a, 6 + b]
+        s_lu[a, a] += alpha
+    if not factor3(s_lu, s_piv):
+        return False
+    for b in range(3):
+        t0, t1, t2 = solve3(s_lu, s_piv, blk[6, b] / alpha + blk[6, 3 + b],
+                            blk[7, b] / alpha + blk[7, 3 + b], blk[8, b] / alpha + blk[8, 3 + b])
+        t_mat[0, b] = t0
+        t_mat[1, b] = t1
+        t_mat[2, b] = t2
+    for a in range(3):
+        for b in range(3):
+            acc = -(blk[3 + a, b] / alpha + blk[3 + a, 3 + b])
+            for c in range(3):
+                acc -= blk[3 + a, 6 + c] * t_mat[c, b]
+            if a == b:
+                acc += alpha
+            out[a, b] = acc
+    return True
 
 
 @jit
@@ -156,31 +166,14 @@ def island_factor(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu,
     for r in range(ab.shape[0]):
         for c in range(ab.shape[1]):
             ab[r, c] = 0.0
+    diag = np.empty((3, 3))
     for p in range(n):
-        blk = own[p]
-        for a in range(3):
-            for b in range(3):
-                s_lu[p, a, b] = -blk[6 + a, 6 + b]
-            s_lu[p, a, a] += alpha
-        if not factor3(s_lu[p], s_piv[p]):
+        if not velocity_block(own[p], alpha, s_lu[p], s_piv[p], t_mat[p], diag):
             return False
-        for b in range(3):
-            t0, t1, t2 = solve3(s_lu[p], s_piv[p],
-                                blk[6, b] / alpha + blk[6, 3 + b],
-                                blk[7, b] / alpha + blk[7, 3 + b],
-                                blk[8, b] / alpha + blk[8, 3 + b])
-            t_mat[p, 0, b] = t0
-            t_mat[p, 1, b] = t1
-            t_mat[p, 2, b] = t2
         o = 3 * pos[p]
         for a in range(3):
             for b in range(3):
-                acc = -(blk[3 + a, b] / alpha + blk[3 + a, 3 + b])
-                for c in range(3):
-                    acc -= blk[3 + a, 6 + c] * t_mat[p, c, b]
-                if a == b:
-                    acc += alpha
-                ab[o + a, b - a + kl] = acc
+                ab[o + a, b - a + kl] = diag[a, b]
     for q in range(pairs.shape[0]):
         i = pairs[q, 0]
         j = pairs[q, 1]

@@ -391,6 +391,23 @@ def _pairs_within_reach(state: SimState, params: SimParams, t1: float,
     return contact_pairs(y[:, 0:3], reach)
 
 
+def _advance_alone(single: np.ndarray, state: SimState, params: SimParams,
+                   segments: tuple[np.ndarray, np.ndarray, np.ndarray], y: np.ndarray,
+                   step_size: np.ndarray, status: np.ndarray, t_event: np.ndarray,
+                   stats: np.ndarray) -> None:
+    """Advance the pieces ``single`` (indices) alone over the segments, arrays in place."""
+    if not single.size:
+        return
+    solver = params.solver
+    ys, hs, st, te = (y[single], step_size[single], status[single], t_event[single])
+    ss = stats[single]
+    advance_batch(ys, state.products[single], params.global_row, *segments, params.model.r,
+                  hs, st, te, solver.rtol, params.atol, solver.h_min, solver.h_max,
+                  solver.h_init, solver.max_steps, ss)
+    y[single], step_size[single], status[single], t_event[single] = ys, hs, st, te
+    stats[single] = ss
+
+
 def _advance_multirate(state: SimState, params: SimParams, profile: RotationProfile,
                        t1: float, y: np.ndarray, step_size: np.ndarray, status: np.ndarray,
                        t_event: np.ndarray, stats: np.ndarray,
@@ -411,15 +428,8 @@ def _advance_multirate(state: SimState, params: SimParams, profile: RotationProf
     seg_t, seg_omega, seg_domega = profile.segments(state.t, t1)
     coupled = np.zeros(state.count, dtype=bool)
     coupled[pairs.reshape(-1)] = True
-    single = np.flatnonzero(~coupled)
-    if single.size:
-        ys, hs, st, te = (y[single], step_size[single], status[single], t_event[single])
-        ss = stats[single]
-        advance_batch(ys, state.products[single], machine, seg_t, seg_omega, seg_domega,
-                      params.model.r, hs, st, te, solver.rtol, params.atol, solver.h_min,
-                      solver.h_max, solver.h_init, solver.max_steps, ss)
-        y[single], step_size[single], status[single], t_event[single] = ys, hs, st, te
-        stats[single] = ss
+    _advance_alone(np.flatnonzero(~coupled), state, params, (seg_t, seg_omega, seg_domega), y,
+                   step_size, status, t_event, stats)
     h_coupling = state.coupling_step or solver.h_init
     members = np.flatnonzero(coupled)
     if not members.size:
@@ -475,16 +485,8 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
     alone = np.ones(state.count, dtype=bool)
     for members, _ in islands:
         alone[members] = False
-    single = np.flatnonzero(alone)
-    seg_t, seg_omega, seg_domega = profile.segments(state.t, t1)
-    if single.size:
-        ys, hs, st, te = (y[single], step_size[single], status[single], t_event[single])
-        ss = stats[single]
-        advance_batch(ys, state.products[single], machine, seg_t, seg_omega, seg_domega,
-                      params.model.r, hs, st, te, solver.rtol, params.atol, solver.h_min,
-                      solver.h_max, solver.h_init, solver.max_steps, ss)
-        y[single], step_size[single], status[single], t_event[single] = ys, hs, st, te
-        stats[single] = ss
+    _advance_alone(np.flatnonzero(alone), state, params, profile.segments(state.t, t1), y,
+                   step_size, status, t_event, stats)
     pull_off = params.model.interactions.pull_off
     for members, local in islands:
         t_start = state.t

@@ -24,8 +24,9 @@ from cone_feeder_sim.weigher import combination
 import numba
 import numpy as np
 import pytest
-from reference_contacts import crowd_trajectory, rim_crowd_exits
-from reference_model import initial_state_on_feeder, table2_params
+from reference_contacts import (
+    crowd_trajectory, FOUR_TOUCHING_TABLE, FOUR_TOUCHING_XY, four_touching_at, rim_crowd_exits)
+from reference_model import table2_params
 
 STILL = [[0.0, 0.0], [100.0, 0.0]]
 TURNING = [[0.0, 0.0], [0.4, -8.0], [5.0, -8.0]]
@@ -112,11 +113,9 @@ def test_a_free_flight_collision_keeps_momentum_and_follows_the_reference() -> N
 def test_the_error_shrinks_with_the_coupling_tolerance() -> None:
     # four touching pieces on a cone spun up to -6 rad/s, 0.4 s, against Radau at 1e-10
     m = multirate()
-    positions = resting(m, [[0.06, 0.0], [0.105, 0.005], [0.15, 0.0], [0.08, 0.04]])
-    y0 = np.array([initial_state_on_feeder(x, 0.0) for x in positions])
-    table = [[0.0, 0.0], [0.3, -6.0], [5.0, -6.0]]
-    ref = crowd_trajectory([table2_params(1)] * 4, y0, table, 0.4, pull_off=0.05,
-                           t_eval=[0.4]).y[:, -1].reshape(4, 9)[:, :3]
+    positions = resting(m, FOUR_TOUCHING_XY)
+    table = [list(r) for r in FOUR_TOUCHING_TABLE]
+    ref = four_touching_at(tuple(map(tuple, positions.tolist())))
     errors = []
     for tolerance in (1e-5, 1e-7, 1e-9):
         sim, _, _ = run(multirate(tolerance), table, positions, 0.4)

@@ -23,8 +23,9 @@ from cone_feeder_sim.physics.simulation import (
     contact_reach, resting_height, SimParams, Simulator)
 import numpy as np
 import pytest
-from reference_contacts import crowd_trajectory, rim_crowd_exits
-from reference_model import initial_state_on_feeder, table2_params
+from reference_contacts import (
+    crowd_trajectory, FOUR_TOUCHING_TABLE, FOUR_TOUCHING_XY, four_touching_at, rim_crowd_exits)
+from reference_model import table2_params
 
 STILL = [[0.0, 0.0], [100.0, 0.0]]
 TURNING = [[0.0, 0.0], [0.4, -8.0], [5.0, -8.0]]
@@ -202,11 +203,9 @@ def test_a_mirrored_crowd_under_mirrored_rotation_mirrors() -> None:
 
 def test_the_error_shrinks_with_the_tolerance() -> None:
     m = model()
-    positions = resting(m, [[0.06, 0.0], [0.105, 0.005], [0.15, 0.0], [0.08, 0.04]])
-    y0 = np.array([initial_state_on_feeder(x, 0.0) for x in positions])
-    table = [[0.0, 0.0], [0.3, -6.0], [5.0, -6.0]]
-    ref = crowd_trajectory([table2_params(1)] * 4, y0, table, 0.4, pull_off=0.05,
-                           t_eval=[0.4]).y[:, -1].reshape(4, 9)[:, :3]
+    positions = resting(m, FOUR_TOUCHING_XY)
+    table = [list(r) for r in FOUR_TOUCHING_TABLE]
+    ref = four_touching_at(tuple(map(tuple, positions.tolist())))
     errors = []
     for rtol in (1e-3, 1e-5, 1e-7):
         sim, _ = simulate(m, table, positions, t_end=0.4, rtol=rtol)
