@@ -102,7 +102,6 @@ def load_resim_plan(source: RunSource) -> ResimPlan:
                      recording.problem)
 
 
-
 #: Parameters that recordings made before they existed lack, with the value those runs had:
 #: they were coupled exactly.
 BEFORE_THEY_EXISTED: dict[str, Any] = {'interactions.coupling': 'exact',
@@ -116,6 +115,7 @@ def recorded_parameter(plan: ResimPlan, name: str) -> tuple[bool, Any]:
     if name in BEFORE_THEY_EXISTED:
         return True, BEFORE_THEY_EXISTED[name]
     return False, None
+
 
 def _event(message: RecordedMessage, where: str) -> dict[str, Any]:
     try:

@@ -25,7 +25,7 @@ import numba
 import numpy as np
 import pytest
 from reference_contacts import (
-    crowd_trajectory, FOUR_TOUCHING_TABLE, FOUR_TOUCHING_XY, four_touching_at, rim_crowd_exits)
+    crowd_trajectory, four_touching_at, FOUR_TOUCHING_TABLE, FOUR_TOUCHING_XY, rim_crowd_exits)
 from reference_model import table2_params
 
 STILL = [[0.0, 0.0], [100.0, 0.0]]

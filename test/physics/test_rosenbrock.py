@@ -115,6 +115,6 @@ def test_embedded_error_estimate_is_small_on_exact_polynomial_free_fall() -> Non
     model.rhs(y, PP, GP, 0.0, 0.0, f0)
     rosenbrock.prepare_step(y, 0.0, 0.0, PP, GP, work, k)
     assert rosenbrock.rodas_step(y, f0, 0.1, 0.0, 0.0, PP, GP, NO_LOAD, NO_LOAD, work, piv, k,
-                                     y1)
+                                 y1)
     np.testing.assert_allclose(y1[:6], _free_flight(0.1, 0.0, 0.0)[:6], atol=1e-14)
     assert np.abs(k[5]).max() < 1e-13
