@@ -76,6 +76,9 @@ FAC_MIN = 0.2
 FAC_MAX = 4.0
 #: Intervals shorter than this (s) are accepted whatever their estimate (counted as forced).
 H_FLOOR = 1.0e-7
+#: Crowds of fewer pieces are advanced on one thread: starting a parallel region costs more
+#: than it saves, and far more on a loaded machine (every interval starts one).
+PARALLEL_PIECES = 16
 #: The load ramps from its last value to the interval's plateau over this fraction of the
 #: interval, so that no piece sees a jump of its load (a jump rings each piece's lightly
 #: damped pre-sliding oscillation, which then costs it many steps).
@@ -123,10 +126,10 @@ def adjacency(n, pairs):
     return start, pair, other, sign
 
 
-@pjit
+@jit
 def pair_forces(y, products, pairs, status, pull_off, eps, out):
     """Write each pair's force on its first piece (N, cone axes) into out (m, 3)."""
-    for q in numba.prange(pairs.shape[0]):
+    for q in range(pairs.shape[0]):
         i = pairs[q, 0]
         j = pairs[q, 1]
         if status[i] != ACTIVE or status[j] != ACTIVE:
@@ -139,14 +142,16 @@ def pair_forces(y, products, pairs, status, pull_off, eps, out):
         out[q, 2] = f2
 
 
-@pjit
+@jit
 def pair_jacobians(y, products, pairs, status, pull_off, eps, out):
     """
     Write d(F)/d(x_i, w_i) of every pair q = (i, j) into out (m, 3, 6), central differences.
 
     d(F)/d(x_j, w_j) = -out[q] (:func:`contact.pair_jacobian`); inactive pairs get zeros.
     """
-    for q in numba.prange(pairs.shape[0]):
+    sx = np.empty(3)
+    sw = np.empty(3)
+    for q in range(pairs.shape[0]):
         i = pairs[q, 0]
         j = pairs[q, 1]
         if status[i] != ACTIVE or status[j] != ACTIVE:
@@ -155,10 +160,10 @@ def pair_jacobians(y, products, pairs, status, pull_off, eps, out):
                     out[q, a, c] = 0.0
             continue
         pair_jacobian(y[i, 0:3], y[i, 3:6], products[i], y[j, 0:3], y[j, 3:6], products[j],
-                      pull_off, eps, out[q], np.empty(3), np.empty(3))
+                      pull_off, eps, out[q], sx, sw)
 
 
-@pjit
+@jit
 def assemble(y, products, machine, omega, domega, alpha, status, start, pair, sign, forces,
              jac, own, f, s_lu, s_piv, t_mat, d_mat, d_lu, d_piv, u, rv):
     """
@@ -173,7 +178,7 @@ def assemble(y, products, machine, omega, domega, alpha, status, start, pair, si
     and a zero right-hand side.
     """
     n = y.shape[0]
-    for p in numba.prange(n):
+    for p in range(n):
         if status[p] != ACTIVE:
             for a in range(3):
                 for b in range(3):
@@ -225,10 +230,10 @@ def neighbour_sum(p, start, pair, other, blocks, v):
     return s0, s1, s2
 
 
-@pjit
+@jit
 def pair_rhs(products, alpha, status, start, pair, other, jac, f, rv):
     """Add the pair terms -G_x f_x(other) / (alpha m_p) to the right-hand side rv (n, 3)."""
-    for p in numba.prange(rv.shape[0]):
+    for p in range(rv.shape[0]):
         if status[p] != ACTIVE:
             continue
         s0, s1, s2 = neighbour_sum(p, start, pair, other, jac[:, :, 0:3], f[:, 0:3])
@@ -238,10 +243,10 @@ def pair_rhs(products, alpha, status, start, pair, other, jac, f, rv):
         rv[p, 2] -= s2 * scale
 
 
-@pjit
+@jit
 def off_blocks(jac, alpha, out):
     """Write G_x / alpha + G_w of every pair, the velocity system's pair block, into out."""
-    for q in numba.prange(jac.shape[0]):
+    for q in range(jac.shape[0]):
         for a in range(3):
             for b in range(3):
                 out[q, a, b] = jac[q, a, b] / alpha + jac[q, a, 3 + b]
@@ -384,12 +389,12 @@ def sub_segments(seg_t, seg_omega, seg_domega, ta, tb, out_t, out_omega, out_dom
     return count
 
 
-@pjit
-def advance_pieces(y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t, flat_omega,
-                   flat_domega, r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max,
-                   h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load, kink):
+@jit
+def advance_group(g, groups, y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t,
+                  flat_omega, flat_domega, r_exit, h_prop, status, t_event, rtol, atol, h_min,
+                  h_max, h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load, kink):
     """
-    Advance every ACTIVE piece over one interval, in parallel: its ramp, then its plateau.
+    Advance the ACTIVE pieces g, g + groups, ... over one interval: the ramp, then the plateau.
 
     ramp_* and flat_* are the sub-segments of the two parts; ramp_load (n, 3) (m/s^2) the
     load at the interval's start and ramp_rate (n, 3) (m/s^3) its rate over the ramp;
@@ -397,31 +402,46 @@ def advance_pieces(y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t
     """
     n = STATE_SIZE
     count = y.shape[0]
-    groups = min(count, GROUPS)
     none = np.zeros(3)
-    for g in numba.prange(groups):
-        work = np.empty((2, n, n))
-        piv = np.empty((2, 3), dtype=np.int64)
-        k = np.empty((n, n))
-        y1 = np.empty(n)
-        f0 = np.empty(n)
-        for p in range(g, count, groups):
-            if status[p] != ACTIVE:
-                continue
-            hp = min(h_prop[p], h_kink) if kink else h_prop[p]
-            st, t_ev, hp = advance_particle(y[p], products[p], machine, ramp_t, ramp_omega,
-                                            ramp_domega, r_exit, hp, rtol, atol, h_min, h_max,
+    work = np.empty((2, n, n))
+    piv = np.empty((2, 3), dtype=np.int64)
+    k = np.empty((n, n))
+    y1 = np.empty(n)
+    f0 = np.empty(n)
+    for p in range(g, count, groups):
+        if status[p] != ACTIVE:
+            continue
+        hp = min(h_prop[p], h_kink) if kink else h_prop[p]
+        st, t_ev, hp = advance_particle(y[p], products[p], machine, ramp_t, ramp_omega,
+                                        ramp_domega, r_exit, hp, rtol, atol, h_min, h_max,
+                                        h_kink, max_steps, stats[p], work, piv, k, y1, f0,
+                                        ramp_load[p], ramp_rate[p])
+        if st == ACTIVE:
+            st, t_ev, hp = advance_particle(y[p], products[p], machine, flat_t, flat_omega,
+                                            flat_domega, r_exit, hp, rtol, atol, h_min, h_max,
                                             h_kink, max_steps, stats[p], work, piv, k, y1, f0,
-                                            ramp_load[p], ramp_rate[p])
-            if st == ACTIVE:
-                st, t_ev, hp = advance_particle(y[p], products[p], machine, flat_t,
-                                                flat_omega, flat_domega, r_exit, hp, rtol,
-                                                atol, h_min, h_max, h_kink, max_steps,
-                                                stats[p], work, piv, k, y1, f0, flat_load[p],
-                                                none)
-            status[p] = st
-            t_event[p] = t_ev
-            h_prop[p] = hp
+                                            flat_load[p], none)
+        status[p] = st
+        t_event[p] = t_ev
+        h_prop[p] = hp
+
+
+@pjit
+def advance_pieces(y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t, flat_omega,
+                   flat_domega, r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max,
+                   h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load, kink):
+    """
+    Advance every ACTIVE piece over one interval on numba's threads (:func:`advance_group`).
+
+    The only parallel region of an interval: pieces are independent inside it, so the result
+    does not depend on the thread count.
+    """
+    groups = min(y.shape[0], GROUPS)
+    for g in numba.prange(groups):
+        advance_group(g, groups, y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t,
+                      flat_omega, flat_domega, r_exit, h_prop, status, t_event, rtol, atol,
+                      h_min, h_max, h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load,
+                      kink)
 
 
 @jit
@@ -438,11 +458,11 @@ def shapes(pairs, status, used, begin, ramp, plateau):
             plateau[q, a] = (used[q, a] - 0.5 * ramp * begin[q, a]) / (1.0 - 0.5 * ramp)
 
 
-@pjit
+@jit
 def piece_loads(products, start, pair, sign, begin, plateau, ramp_time, ramp_load, ramp_rate,
                 flat_load):
     """Sum each piece's pair loads (m/s^2): at the start, their rate in the ramp, plateau."""
-    for p in numba.prange(ramp_load.shape[0]):
+    for p in range(ramp_load.shape[0]):
         mp = products[p, P_M]
         for a in range(3):
             b0 = 0.0
@@ -455,14 +475,14 @@ def piece_loads(products, start, pair, sign, begin, plateau, ramp_time, ramp_loa
             ramp_rate[p, a] = (b1 - b0) / (mp * ramp_time)
 
 
-@pjit
+@jit
 def loads_from(y_pred_delta, status, pairs, forces, jac, used):
     """
     Write each pair's force at the predicted end into used (m, 3).
 
     used_q = F_q + G_q (k_i - k_j) over positions and velocities (k the prediction, (n, 9)).
     """
-    for q in numba.prange(pairs.shape[0]):
+    for q in range(pairs.shape[0]):
         i = pairs[q, 0]
         j = pairs[q, 1]
         for a in range(3):
@@ -506,6 +526,16 @@ def largest_norm(v):
             return np.inf
         worst = max(worst, norm)
     return worst
+
+
+@jit
+def advance_serially(y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t, flat_omega,
+                     flat_domega, r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max,
+                     h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load, kink):
+    """Advance every ACTIVE piece over one interval on this thread (a small crowd)."""
+    advance_group(0, 1, y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t,
+                  flat_omega, flat_domega, r_exit, h_prop, status, t_event, rtol, atol, h_min,
+                  h_max, h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load, kink)
 
 
 @jit
@@ -614,7 +644,8 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
         c0 = sub_segments(seg_t, seg_omega, seg_domega, t, t_mid, sub_t, sub_omega, sub_domega)
         c1 = sub_segments(seg_t, seg_omega, seg_domega, t_mid, t_end, sub2_t, sub2_omega,
                           sub2_domega)
-        advance_pieces(y, products, machine, sub_t[:c0 + 1], sub_omega[:c0],
+        pieces = advance_pieces if n >= PARALLEL_PIECES else advance_serially
+        pieces(y, products, machine, sub_t[:c0 + 1], sub_omega[:c0],
                        sub_domega[:c0], sub2_t[:c1 + 1], sub2_omega[:c1], sub2_domega[:c1],
                        r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max, h_kink,
                        max_steps, stats, ramp_load, ramp_rate, flat_load, kink)
