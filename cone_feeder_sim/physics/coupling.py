@@ -644,11 +644,18 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
         c0 = sub_segments(seg_t, seg_omega, seg_domega, t, t_mid, sub_t, sub_omega, sub_domega)
         c1 = sub_segments(seg_t, seg_omega, seg_domega, t_mid, t_end, sub2_t, sub2_omega,
                           sub2_domega)
-        pieces = advance_pieces if n >= PARALLEL_PIECES else advance_serially
-        pieces(y, products, machine, sub_t[:c0 + 1], sub_omega[:c0],
-                       sub_domega[:c0], sub2_t[:c1 + 1], sub2_omega[:c1], sub2_domega[:c1],
-                       r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max, h_kink,
-                       max_steps, stats, ramp_load, ramp_rate, flat_load, kink)
+        if n >= PARALLEL_PIECES:
+            advance_pieces(y, products, machine, sub_t[:c0 + 1], sub_omega[:c0],
+                           sub_domega[:c0], sub2_t[:c1 + 1], sub2_omega[:c1],
+                           sub2_domega[:c1], r_exit, h_prop, status, t_event, rtol, atol,
+                           h_min, h_max, h_kink, max_steps, stats, ramp_load, ramp_rate,
+                           flat_load, kink)
+        else:
+            advance_serially(y, products, machine, sub_t[:c0 + 1], sub_omega[:c0],
+                             sub_domega[:c0], sub2_t[:c1 + 1], sub2_omega[:c1],
+                             sub2_domega[:c1], r_exit, h_prop, status, t_event, rtol, atol,
+                             h_min, h_max, h_kink, max_steps, stats, ramp_load, ramp_rate,
+                             flat_load, kink)
         # 4. the error of the interval's impulses
         pair_forces(y, products, pairs, status, pull_off, eps, f_end)
         raw_error(products, status, start, pair, other, sign, used, forces, f_end, hc, alpha,
