@@ -28,7 +28,9 @@ coupling"):
 2. **The pair forces over the interval** are each pair's force at the predicted end,
    linearised: F_q = F_q(y) + G_q (k_i - k_j). This is backward Euler for the pair terms, so
    the stiff relative velocities are damped, not rung. Each piece gets the sum of its pairs'
-   forces as a constant load; the two pieces of a pair get exactly opposite loads.
+   forces as a load: it ramps from its last value over the first RAMP of the interval to a
+   plateau chosen so that the impulse is F_q H (a jump would ring the piece). The two
+   pieces of a pair get exactly opposite loads.
 3. **Each piece alone.** Every piece is integrated over the interval with the load by the
    per-piece kernel (:func:`integrator.advance_particle`): its own RODAS4 steps, step
    control, kinks and exit location, as when it is alone. The pieces run in parallel.
@@ -39,13 +41,13 @@ coupling"):
    the pieces reached. As in stiff integrators (Shampine), it is filtered through
    (I - H J)^-1 of the coupled system, the prediction's own matrix: in the stiff directions,
    where the implicit prediction is right and the trapezoidal rule is not, the raw estimate
-   is damped. The interval is accepted where the largest filtered error is within the
-   tolerance, and the next one is sized for the split's order 1 (local error O(H^2)). A
-   rejected interval is a result: every piece goes back to the interval's start and it is
-   tried again shorter.
+   is damped. The interval is accepted where the largest position part of the filtered
+   error (m) is within the tolerance, and the next one is sized for the split's order 1
+   (local error O(H^2)). A rejected interval is a result: every piece goes back to the
+   interval's start and it is tried again shorter.
 
-Momentum: a pair's two loads are equal and opposite and constant, so the impulses they give
-over an interval are equal and opposite whatever steps the two pieces take.
+Momentum: a pair's two loads are equal and opposite at every instant, so the impulses they
+give over an interval are equal and opposite whatever steps the two pieces take.
 """
 
 import math
@@ -55,10 +57,9 @@ import numpy as np
 
 from .contact import pair_force, pair_jacobian
 from .integrator import ACTIVE, advance_particle, GROUPS, STAT_REASON
-from .islands import velocity_block
 from .model import jacobian, rhs, STATE_SIZE
 from .params import G_EPS, P_M
-from .rosenbrock import factor3, solve3
+from .rosenbrock import eliminate_filter, factor3, solve3
 
 __all__ = ['advance_coupled', 'COUPLING_STAT_WIDTH', 'CST_ACCEPTED', 'CST_FORCED',
            'CST_ITERATIONS', 'CST_REJECTED']
@@ -83,7 +84,6 @@ PARALLEL_PIECES = 16
 #: interval, so that no piece sees a jump of its load (a jump rings each piece's lightly
 #: damped pre-sliding oscillation, which then costs it many steps).
 RAMP = 0.5
-DEBUG = False
 
 # counters of one call (counters array, int64)
 CST_ACCEPTED = 0   # coupling intervals accepted
@@ -200,7 +200,7 @@ def assemble(y, products, machine, omega, domega, alpha, status, start, pair, si
                 f[p, 3 + a] += sign[e] * forces[q, a] / mp
                 for c in range(6):
                     blk[3 + a, c] += jac[q, a, c] / mp
-        velocity_block(blk, alpha, s_lu[p], s_piv[p], t_mat[p], d_mat[p])
+        eliminate_filter(blk, alpha, s_lu[p], s_piv[p], t_mat[p], d_mat[p])
         d_lu[p] = d_mat[p]
         factor3(d_lu[p], d_piv[p])
         r0 = f[p, 6] + (blk[6, 0] * f[p, 0] + blk[6, 1] * f[p, 1] + blk[6, 2] * f[p, 2]) / alpha
@@ -445,7 +445,7 @@ def advance_pieces(y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t
 
 
 @jit
-def shapes(pairs, status, used, begin, ramp, plateau):
+def shapes(used, begin, ramp, plateau):
     """
     Write each pair's plateau: the load that ramps from begin over ramp of the interval.
 
@@ -453,7 +453,7 @@ def shapes(pairs, status, used, begin, ramp, plateau):
     ramp (fraction of the interval) from begin (m, 3) to the plateau, then the plateau,
     so plateau = (used - ramp begin / 2) / (1 - ramp / 2).
     """
-    for q in range(pairs.shape[0]):
+    for q in range(used.shape[0]):
         for a in range(3):
             plateau[q, a] = (used[q, a] - 0.5 * ramp * begin[q, a]) / (1.0 - 0.5 * ramp)
 
@@ -548,7 +548,8 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
     y (n, 9) cone-axes states, products (n, W), pairs (m, 2) int64 local indices i < j;
     h_prop (n,), status (n,), t_event (n,), stats (n, STAT_WIDTH) as in
     :func:`integrator.advance_batch`, updated in place; h_coupling (s) the proposed first
-    coupling interval; tolerance (m/s) the largest impulse error per interval and piece;
+    coupling interval; tolerance (m) the largest position error one interval may give a
+    piece (the filtered estimate's position part);
     counters (COUPLING_STAT_WIDTH,) int64. Pieces that exit or fail inside an interval
     leave the coupling at their time, their pairs with them. Returns the proposed next
     coupling interval (s).
@@ -629,7 +630,7 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
         # 2. the pair forces at the predicted end, each piece's load
         loads_from(delta, status, pairs, forces, jac, used)
         ramp_time = RAMP * hc
-        shapes(pairs, status, used, begin, RAMP, plateau)
+        shapes(used, begin, RAMP, plateau)
         piece_loads(products, start, pair, sign, begin, plateau, ramp_time, ramp_load,
                     ramp_rate, flat_load)
         # 3. every piece alone, with its load
@@ -664,8 +665,6 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
                        kw, scratch)
         counters[CST_ITERATIONS] += abs(its)
         err = hc * largest_norm(kw) if its >= 0 else np.inf  # its position part (m)
-        if DEBUG:
-            print(t, hc, largest_norm(rv) / alpha, err, its)
         ratio = err / tolerance
         if not (ratio <= 1.0) and hc > H_FLOOR:
             counters[CST_REJECTED] += 1

@@ -46,10 +46,10 @@ from .model import jacobian, rhs, rhs_omega_derivative, STATE_SIZE
 from .params import G_EPS, P_M
 from .rosenbrock import (
     A21, A31, A32, A41, A42, A43, A51, A52, A53, A54, C2, C21, C3, C31, C32, C4, C41, C42,
-    C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, factor3,
+    C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, eliminate_filter,
     GAMMA, solve3)
 
-__all__ = ['advance_island', 'islands_of', 'velocity_block']
+__all__ = ['advance_island', 'islands_of']
 
 jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
@@ -113,40 +113,6 @@ def island_jacobian(y, products, pairs, machine, omega, domega, pull_off, own, p
 
 
 @jit
-def velocity_block(blk, alpha, s_lu, s_piv, t_mat, out):
-    """
-    Eliminate a piece's filter rows from alpha I - J; write its velocity block into out.
-
-    blk (9, 9) the piece's Jacobian (its pairs' diagonal blocks included); s_lu (3, 3) and
-    s_piv (3,) receive the factored S = alpha I - J_PP, t_mat (3, 3) the
-    T = S^-1 (J_Px/alpha + J_Pw); out (3, 3) = alpha I - J_wP T - (J_wx/alpha + J_ww), the
-    piece's diagonal block of the velocity system (see :func:`island_factor`). Returns False
-    if S is singular.
-    """
-    for a in range(3):
-        for b in range(3):
-            s_lu[a, b] = -blk[6 + a, 6 + b]
-        s_lu[a, a] += alpha
-    if not factor3(s_lu, s_piv):
-        return False
-    for b in range(3):
-        t0, t1, t2 = solve3(s_lu, s_piv, blk[6, b] / alpha + blk[6, 3 + b],
-                            blk[7, b] / alpha + blk[7, 3 + b], blk[8, b] / alpha + blk[8, 3 + b])
-        t_mat[0, b] = t0
-        t_mat[1, b] = t1
-        t_mat[2, b] = t2
-    for a in range(3):
-        for b in range(3):
-            acc = -(blk[3 + a, b] / alpha + blk[3 + a, 3 + b])
-            for c in range(3):
-                acc -= blk[3 + a, 6 + c] * t_mat[c, b]
-            if a == b:
-                acc += alpha
-            out[a, b] = acc
-    return True
-
-
-@jit
 def island_factor(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu, s_piv,
                   t_mat):
     """
@@ -168,7 +134,7 @@ def island_factor(own, pair_jac, pairs, products, alpha, pos, kl, ab, piv, s_lu,
             ab[r, c] = 0.0
     diag = np.empty((3, 3))
     for p in range(n):
-        if not velocity_block(own[p], alpha, s_lu[p], s_piv[p], t_mat[p], diag):
+        if not eliminate_filter(own[p], alpha, s_lu[p], s_piv[p], t_mat[p], diag):
             return False
         o = 3 * pos[p]
         for a in range(3):

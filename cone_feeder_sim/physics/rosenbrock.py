@@ -144,17 +144,13 @@ def factor3(a, piv):
 
 
 @jit
-def factor_mechanical(jac, alpha, lu_m, lu_s, tmat, piv_m, piv_s):
+def eliminate_filter(jac, alpha, lu_m, piv_m, tmat, s):
     """
-    Factor W = alpha I - J for a mechanical system, using its block structure.
+    Eliminate x and P from W = alpha I - J; write the velocity block S into s (3, 3).
 
-    J (9, 9) must have the block rows [0, I, 0] (dx/dt = w), [A, B, C] and [D, E, F] for
-    the state blocks (x, w, P). Eliminating x and P leaves two 3x3 systems:
-    M = alpha I - F and the Schur complement S = alpha I - B - A/alpha - C M^-1 (D/alpha + E).
-    lu_m, lu_s (3, 3) receive LU(M) and LU(S) (see :func:`factor3`), tmat (3, 3) is
-    scratch, piv_m, piv_s (3,) receive the pivots. Much cheaper than a dense 9x9
-    factorisation; test_rosenbrock compares it with a dense solve. Returns False if a pivot
-    vanishes or is not finite.
+    J as in :func:`factor_mechanical`: lu_m, piv_m receive LU(M), M = alpha I - F; tmat (3, 3)
+    receives T = M^-1 (D/alpha + E); s = alpha I - B - A/alpha - C T, not factored (the
+    contact kernels add pair blocks to it). Returns False if M cannot be factored.
     """
     inv_a = 1.0 / alpha
     for i in range(3):
@@ -172,10 +168,28 @@ def factor_mechanical(jac, alpha, lu_m, lu_s, tmat, piv_m, piv_s):
         tmat[2, j] = c2
     for i in range(3):
         for j in range(3):
-            lu_s[i, j] = (-jac[3 + i, 3 + j] - jac[3 + i, j] * inv_a
-                          - jac[3 + i, 6] * tmat[0, j] - jac[3 + i, 7] * tmat[1, j]
-                          - jac[3 + i, 8] * tmat[2, j])
-        lu_s[i, i] += alpha
+            s[i, j] = (-jac[3 + i, 3 + j] - jac[3 + i, j] * inv_a
+                       - jac[3 + i, 6] * tmat[0, j] - jac[3 + i, 7] * tmat[1, j]
+                       - jac[3 + i, 8] * tmat[2, j])
+        s[i, i] += alpha
+    return True
+
+
+@jit
+def factor_mechanical(jac, alpha, lu_m, lu_s, tmat, piv_m, piv_s):
+    """
+    Factor W = alpha I - J for a mechanical system, using its block structure.
+
+    J (9, 9) must have the block rows [0, I, 0] (dx/dt = w), [A, B, C] and [D, E, F] for
+    the state blocks (x, w, P). Eliminating x and P leaves two 3x3 systems:
+    M = alpha I - F and the Schur complement S = alpha I - B - A/alpha - C M^-1 (D/alpha + E).
+    lu_m, lu_s (3, 3) receive LU(M) and LU(S) (see :func:`factor3`), tmat (3, 3) is
+    scratch, piv_m, piv_s (3,) receive the pivots. Much cheaper than a dense 9x9
+    factorisation; test_rosenbrock compares it with a dense solve. Returns False if a pivot
+    vanishes or is not finite.
+    """
+    if not eliminate_filter(jac, alpha, lu_m, piv_m, tmat, lu_s):
+        return False
     return factor3(lu_s, piv_s)
 
 

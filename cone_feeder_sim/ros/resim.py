@@ -30,6 +30,7 @@ from ..formats.cdr import CdrError, default_codec
 from ..formats.mcap_reader import (
     open_recording, parse_run_source, RecordedMessage, RunSource)
 from ..formats.runlog import END_METADATA_NAME, FORMAT_VERSION, METADATA_NAME
+from ..physics.params import InteractionParams
 
 __all__ = ['ResimPlan', 'load_resim_plan']
 
@@ -104,8 +105,9 @@ def load_resim_plan(source: RunSource) -> ResimPlan:
 
 #: Parameters that recordings made before they existed lack, with the value those runs had:
 #: they were coupled exactly.
-BEFORE_THEY_EXISTED: dict[str, Any] = {'interactions.coupling': 'exact',
-                                       'interactions.coupling_tolerance': 1.0e-6}
+BEFORE_THEY_EXISTED: dict[str, Any] = {
+    'interactions.coupling': 'exact',
+    'interactions.coupling_tolerance': InteractionParams().coupling_tolerance}
 
 
 def recorded_parameter(plan: ResimPlan, name: str) -> tuple[bool, Any]:
