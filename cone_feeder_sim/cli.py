@@ -227,7 +227,7 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
                   f't = {result.end_time:.3f} s: {files.events} exits written to '
                   f'{args.events}{recorded}\n')
         return 128 + stop.signum
-    err.write(f'{files.events} of {len(scenario.particles)} pieces left the cone; '
+    err.write(f'{files.events} of {result.pieces} pieces left the cone; '
               f'{result.remaining_ids.size} still on it, {len(result.failures)} failed; '
               f'events written to {args.events}\n')
     if args.mcap:

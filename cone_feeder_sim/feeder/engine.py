@@ -29,13 +29,8 @@ every :meth:`FeederEngine.tick`. It owns
   omega ramps linearly at the acceleration limit and is held once the target is reached,
   so the tick's :class:`~cone_feeder_sim.physics.rotation.RotationProfile` has a kink inside the
   tick when the target is reached mid-tick.
-* the **product feed**: pieces arrive as a Poisson process of ``rate`` pieces/s (the count
-  per tick is Poisson(rate * dt)), at positions uniform over the annulus
-  ``rho_min <= rho <= rho_max`` (uniform per area) at ``drop_height`` above the cone
-  surface (centre of the piece, measured vertically), at rest in the world frame (dropped,
-  not carried). Masses are log-normal with the default product's mass as mean and relative
-  standard deviation ``mass_rel_std``; the damping d is drawn uniformly from ``d_values``
-  (empty: the default product's d). All draws come from one ``numpy.random.Generator``
+* the **product feed** (:mod:`~cone_feeder_sim.feeder.feed`): Poisson arrivals drawn once
+  per tick (the count per tick is Poisson(rate * dt)) from one ``numpy.random.Generator``
   seeded with ``seed``, so the feed is reproducible.
 * the **inputs** (rotation commands, spawn requests, resets and reconfigurations): they
   are validated when submitted (invalid ones raise a
@@ -62,10 +57,10 @@ from typing import Any
 
 import numpy as np
 
+from .feed import check_feed_fits, draw_feed, FEED_LIMITS, FeedParams
 from ..errors import InputError, ParameterError, ScenarioError
 from ..physics.params import (
-    check_integer, check_number, Limit, ModelParams, P_M, PRODUCT_LIMITS, ProductParams,
-    SolverParams)
+    check_integer, check_number, Limit, ModelParams, P_M, ProductParams, SolverParams)
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
     add_particles, advance, as_points, check_positions, ExitEvents, Failure, SimParams, SimState,
@@ -98,13 +93,8 @@ ENGINE_LIMITS: dict[str, Limit] = {
     'cmd_timeout': Limit(0.0, 1.0e6, 's'),
     'pattern_duration': Limit(0.0, 1.0e6, 's', lo_open=True),
     'pattern_omega': Limit(-100.0, 100.0, 'rad/s'),
-    'feed_rate': Limit(0.0, 1.0e4, 'pieces/s'),
-    'feed_rho': Limit(0.0, 20.0, 'm'),
-    'feed_drop_height': Limit(0.0, 10.0, 'm'),
-    'feed_mass_rel_std': Limit(0.0, 1.0, ''),
-    'max_pieces': Limit(1, 10 ** 6, ''),
-    'seed': Limit(0, 2 ** 63 - 1, ''),
     'spawn_max_height': Limit(0.0, 100.0, 'm', lo_open=True),
+    **FEED_LIMITS,
 }
 
 #: Segment boundaries of the open-loop pattern closer than this (s) count as reached.
@@ -186,49 +176,6 @@ class DriveParams:
         return self.pattern[-1][1]
 
 
-@dataclass(frozen=True)
-class FeedParams:
-    """
-    The product feed: Poisson arrivals over an annulus, with product variation.
-
-    rate (pieces/s, 0 = off); rho_min, rho_max (m) the drop annulus; drop_height (m) of the
-    piece's centre above the cone surface; mass_rel_std relative standard deviation of the
-    (log-normal) mass; d_values (N*s/m) damping values drawn uniformly (empty: default);
-    max_pieces: the feed pauses while this many pieces are on the cone.
-    """
-
-    rate: float = 0.0
-    rho_min: float = 0.03
-    rho_max: float = 0.15
-    drop_height: float = 0.05
-    mass_rel_std: float = 0.0
-    d_values: tuple[float, ...] = ()
-    max_pieces: int = 2000
-
-    def __post_init__(self) -> None:
-        """Validate every field; errors name the field."""
-        object.__setattr__(self, 'rate', check_number('feed.rate', self.rate,
-                                                      ENGINE_LIMITS['feed_rate']))
-        for key in ('rho_min', 'rho_max'):
-            object.__setattr__(self, key, check_number(f'feed.{key}', getattr(self, key),
-                                                       ENGINE_LIMITS['feed_rho']))
-        if not self.rho_min <= self.rho_max:
-            raise ParameterError(f'feed.rho_min = {self.rho_min:g} m must not exceed '
-                                 f'feed.rho_max = {self.rho_max:g} m')
-        object.__setattr__(self, 'drop_height', check_number(
-            'feed.drop_height', self.drop_height, ENGINE_LIMITS['feed_drop_height']))
-        object.__setattr__(self, 'mass_rel_std', check_number(
-            'feed.mass_rel_std', self.mass_rel_std, ENGINE_LIMITS['feed_mass_rel_std']))
-        if isinstance(self.d_values, (str, bytes)):
-            raise ParameterError(f'feed.d_values must be a list of numbers, got '
-                                 f'{self.d_values!r}')
-        object.__setattr__(self, 'd_values', tuple(
-            check_number(f'feed.d_values[{i}]', v, PRODUCT_LIMITS['d'])
-            for i, v in enumerate(self.d_values)))
-        object.__setattr__(self, 'max_pieces', check_integer(
-            'feed.max_pieces', self.max_pieces, ENGINE_LIMITS['max_pieces']))
-
-
 @dataclass(frozen=True, eq=False)
 class PieceSpec:
     """A piece placed at the start and after every reset: world position (m), product."""
@@ -281,14 +228,6 @@ class EngineConfig:
                     as_points('velocity', piece.velocity, 1)
             except ScenarioError as exc:
                 raise ScenarioError(f'initial piece {i}: {exc}') from exc
-
-
-def check_feed_fits(model: ModelParams, feed: FeedParams) -> None:
-    """Refuse a feed annulus that reaches the cone edge."""
-    if feed.rho_max >= model.r:
-        raise ParameterError(
-            f'feed.rho_max = {feed.rho_max:g} m must be inside the cone (radius r = '
-            f'{model.r:g} m)')
 
 
 @dataclass(frozen=True)
@@ -675,36 +614,15 @@ class FeederEngine:
                             None if item.products is None else item.products[:room])
 
     def _feed_pieces(self) -> np.ndarray:
-        """Drop this tick's feed pieces; return their ids."""
-        feed = self._feed
-        if feed.rate <= 0.0:
+        """Drop this tick's feed pieces (:func:`~.feed.draw_feed`); return their ids."""
+        room = max(0, self._feed.max_pieces - self._state.count)
+        drop = draw_feed(self._rng, self._feed, self._config.model, self._config.dt, room)
+        if drop is None:
             return np.zeros(0, dtype=np.int64)
-        rng = self._rng
-        count = int(rng.poisson(feed.rate * self._config.dt))
-        count = min(count, max(0, feed.max_pieces - self._state.count))
-        if count == 0:
-            return np.zeros(0, dtype=np.int64)
-        model = self._config.model
-        rho = np.sqrt(rng.uniform(feed.rho_min ** 2, feed.rho_max ** 2, count))
-        theta = rng.uniform(0.0, 2.0 * math.pi, count)
-        positions = np.empty((count, 3))
-        positions[:, 0] = rho * np.cos(theta)
-        positions[:, 1] = rho * np.sin(theta)
-        positions[:, 2] = model.h * (1.0 - rho / model.r) + feed.drop_height
-        default = model.product
-        sigma = math.sqrt(math.log1p(feed.mass_rel_std ** 2))
-        masses = default.m * np.exp(sigma * rng.standard_normal(count) - 0.5 * sigma * sigma)
-        masses = np.clip(masses, 1.0e-6, PRODUCT_LIMITS['m'].hi)
-        if feed.d_values:
-            d = np.asarray(feed.d_values)[rng.integers(0, len(feed.d_values), count)]
-        else:
-            d = np.full(count, default.d)
-        products = [default.with_overrides({'m': float(mi), 'd': float(di)})
-                    for mi, di in zip(masses, d)]
-        self._state, ids = add_particles(self._state, self._sim_params, positions,
-                                         np.zeros_like(positions), products,
+        self._state, ids = add_particles(self._state, self._sim_params, drop.positions,
+                                         np.zeros_like(drop.positions), drop.products,
                                          omega=self._omega)
-        self._mass_in += float(masses.sum())
+        self._mass_in += float(drop.masses.sum())
         return ids
 
     def _target(self, t0: float) -> tuple[float, str]:

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .feed import draw_feed
 from .scenario import Scenario
 from ..physics.simulation import ExitEvents, Failure, SimParams, Simulator, StepResult
 from ..weigher.machine import Pack, Weigher
@@ -41,6 +42,7 @@ class RunResult:
     predicate ended it before the scenario's end. With a weigher in the scenario, packs
     are the packs it made (the run goes on to the scenario's duration, also after the last
     piece left the cone) and weigher is the machine at the end (balance, statistics).
+    pieces: how many pieces were placed on the cone (the scenario's and the feed's).
     """
 
     exits: list[ExitEvents] = field(default_factory=list)
@@ -52,6 +54,7 @@ class RunResult:
     stopped: bool = False
     packs: list[Pack] = field(default_factory=list)
     weigher: Weigher | None = None
+    pieces: int = 0
 
     def exit_table(self) -> dict[str, np.ndarray]:
         """Return all exits as columns (ids, t, angle_deg, channel, position, velocity, mass)."""
@@ -74,7 +77,10 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
     """
     Run a validated scenario to its end, or until stop() says so.
 
-    Without a weigher the run also ends when every piece has left the cone.
+    Without a weigher and without a feed the run also ends when every piece has left the
+    cone. With a feed, the pieces that arrive during an interval (Poisson(rate * interval),
+    :func:`~cone_feeder_sim.feeder.feed.draw_feed`) are dropped at its start; their ids
+    continue after the scenario's pieces.
 
     Particle ids are the 0-based indices of the pieces in the scenario. progress, if given,
     is called after every output interval with the simulated time at its end, the simulator
@@ -84,21 +90,30 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
     (default: a new one), so that a progress callback can record it as it goes.
     """
     sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
+    feed = scenario.feed if scenario.feed is not None and scenario.feed.rate > 0.0 else None
+    rng = np.random.default_rng(scenario.feed_seed)
     for spec in scenario.particles:
         sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
                 [spec.product])
-    result = RunResult()
+    result = RunResult(pieces=len(scenario.particles))
     if scenario.weigher is None:
         weigher = None
     elif weigher is None:
         weigher = Weigher(scenario.weigher, scenario.model.channels.count)
     k = 0
-    while sim.t < scenario.duration and (sim.state.count or weigher is not None):
+    while sim.t < scenario.duration and (sim.state.count or weigher is not None
+                                         or feed is not None):
         if stop is not None and stop():
             result.stopped = True
             break
         k += 1
         t1 = min(scenario.duration, k * scenario.output_interval)
+        if feed is not None:
+            drop = draw_feed(rng, feed, scenario.model, t1 - sim.t,
+                             feed.max_pieces - sim.state.count)
+            if drop is not None:
+                sim.add(drop.positions, np.zeros_like(drop.positions), drop.products)
+                result.pieces += len(drop.products)
         step = sim.advance_to(t1)
         result.accepted_steps += step.stats.accepted
         result.rejected_steps += step.stats.rejected

@@ -17,6 +17,7 @@
 
 from dataclasses import dataclass
 
+from .feed import FeedParams
 from ..physics.params import ModelParams, ProductParams, SolverParams
 from ..physics.rotation import RotationProfile
 from ..weigher.machine import WeigherParams
@@ -33,7 +34,15 @@ class ParticleSpec:
 
 @dataclass(frozen=True)
 class Scenario:
-    """A validated scenario; weigher: the machine below the cone, or None (no weigher)."""
+    """
+    A validated scenario.
+
+    duration (s); particles placed at t = 0 (ids 0 .. len - 1); output_interval (s) of the
+    runner's progress and output; weigher: the machine below the cone, or None (no
+    weigher); feed: pieces dropped during the run (:mod:`~cone_feeder_sim.feeder.feed`,
+    drawn once per output interval from a generator seeded with feed_seed; ids continue
+    after the particles), or None (no feed).
+    """
 
     duration: float
     model: ModelParams
@@ -42,3 +51,5 @@ class Scenario:
     particles: tuple[ParticleSpec, ...]
     output_interval: float = 0.01
     weigher: WeigherParams | None = None
+    feed: FeedParams | None = None
+    feed_seed: int = 0

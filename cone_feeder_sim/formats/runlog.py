@@ -269,6 +269,11 @@ def scenario_metadata(scenario: Scenario, source: str, topics: Mapping[str, str]
     values.update(solver_parameter_values(scenario.solver))
     values.update(interaction_values(scenario.model))
     values['weigher.enabled'] = scenario.weigher is not None
+    values['feed.enabled'] = scenario.feed is not None
+    if scenario.feed is not None:
+        values.update({f'feed.{f.name}': getattr(scenario.feed, f.name)
+                       for f in dataclasses.fields(scenario.feed)})
+        values['feed.seed'] = scenario.feed_seed
     if scenario.weigher is not None:
         values.update({f'weigher.{f.name}': getattr(scenario.weigher, f.name)
                        for f in dataclasses.fields(scenario.weigher)})
@@ -286,7 +291,7 @@ def scenario_metadata(scenario: Scenario, source: str, topics: Mapping[str, str]
         'parameters_json': json.dumps(to_jsonable(values)),
         'topics': json.dumps(dict(topics)),
         'input_topics': '[]',
-        'seed': '',
+        'seed': str(scenario.feed_seed) if scenario.feed is not None else '',
         'created': datetime.datetime.now().astimezone().isoformat(timespec='seconds'),
     })
     return data

@@ -27,7 +27,10 @@ A scenario is a YAML mapping::
                                   # default machine of config/weigher.yaml); packs CSV
     output_interval: 0.01         # s, optional: interval of progress and trajectory output
     rotation: [[0.0, 0.0], [0.4, -10.47]]   # [t s, omega rad/s]; linear between, held after
-    particles:
+    feed: {rate: 5.0, seed: 3}    # optional product feed, the node's feed.* keys (pieces/s,
+                                  # rho_min, rho_max, drop_height, mass_rel_std, d_values,
+                                  # max_pieces, seed); drawn per output interval
+    particles:                    # may be empty or left out when a feed is given
       - position: [0.11, -0.01, 0.03]      # m, world frame
         velocity: [0.0, 0.0, 0.0]          # optional; default: moving with the cone surface
         on_surface: false                  # optional; true: z set to the resting height
@@ -46,6 +49,7 @@ import numpy as np
 
 from .parameter_file import load_model_params, load_weigher_params, read_yaml
 from ..errors import ConeFeederError, ScenarioError
+from ..feeder.feed import check_feed_fits, feed_from_mapping
 from ..feeder.scenario import ParticleSpec, Scenario
 from ..physics.params import (
     interaction_params_from_mapping, PRODUCT_LIMITS, solver_params_from_mapping)
@@ -54,7 +58,7 @@ from ..physics.simulation import check_positions, resting_height
 from ..weigher.machine import check_machine
 
 SCENARIO_KEYS = ('duration', 'parameters', 'model', 'solver', 'interactions', 'weigher',
-                 'output_interval', 'rotation', 'particles')
+                 'output_interval', 'rotation', 'particles', 'feed')
 PARTICLE_KEYS = ('position', 'velocity', 'on_surface')
 
 
@@ -84,7 +88,8 @@ def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenari
     if unknown:
         raise ScenarioError(f'unknown scenario key(s) {", ".join(map(repr, unknown))}; '
                             f'known: {", ".join(SCENARIO_KEYS)}')
-    for key in ('duration', 'rotation', 'particles'):
+    has_feed = content.get('feed') is not None
+    for key in ('duration', 'rotation') + (() if has_feed else ('particles',)):
         if key not in content:
             raise ScenarioError(f'scenario is missing the key {key!r}')
     duration = _positive('duration', content['duration'])
@@ -106,9 +111,19 @@ def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenari
         rotation = RotationProfile.from_table(content['rotation'])
     except ConeFeederError as exc:
         raise ScenarioError(str(exc)) from exc
-    raw_particles = content['particles']
-    if not isinstance(raw_particles, list) or not raw_particles:
-        raise ScenarioError('particles must be a non-empty list of pieces')
+    feed, feed_seed = None, 0
+    if has_feed:
+        try:
+            feed, feed_seed = feed_from_mapping(content['feed'])
+            check_feed_fits(model, feed)
+        except ConeFeederError as exc:
+            raise ScenarioError(str(exc)) from exc
+    raw_particles = content.get('particles')
+    if raw_particles is None and has_feed:
+        raw_particles = []
+    if not isinstance(raw_particles, list) or not (raw_particles or has_feed):
+        raise ScenarioError('particles must be a non-empty list of pieces (it may be empty '
+                            'when the scenario has a feed)')
     particles = []
     for i, raw in enumerate(raw_particles):
         where = f'particles[{i}]'
@@ -146,7 +161,8 @@ def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenari
         except ConeFeederError as exc:
             raise ScenarioError(str(exc)) from exc
     return Scenario(duration=duration, model=model, solver=solver, rotation=rotation,
-                    particles=tuple(particles), output_interval=interval, weigher=weigher)
+                    particles=tuple(particles), output_interval=interval, weigher=weigher,
+                    feed=feed, feed_seed=feed_seed)
 
 
 def load_scenario(path: str | Path) -> Scenario:

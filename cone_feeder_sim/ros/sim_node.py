@@ -135,8 +135,8 @@ from .qos import rclpy_qos
 from .resim import load_resim_plan, recorded_parameter, ResimPlan
 from .. import __version__
 from ..errors import ConeFeederError, ParameterError
-from ..feeder.engine import (
-    ChannelFeed, check_feed_fits, FeederEngine, MAX_PENDING_INPUTS, TickResult)
+from ..feeder.engine import ChannelFeed, FeederEngine, MAX_PENDING_INPUTS, TickResult
+from ..feeder.feed import check_feed_fits
 from ..formats.cdr import CdrError, default_codec
 from ..formats.mcap_writer import COMPRESSIONS
 from ..formats.messages import (

@@ -28,7 +28,8 @@ A sweep is a YAML mapping::
       keys:
         model.mu_C: {uniform: [0.6, 0.95]}       # also loguniform: [a, b] (0 < a),
         particles.0.m: {choice: [0.1, 0.125]}    # integers: [a, b] (both included)
-    seeds: 3                      # optional: 0, 1, 2 (or a list) as weigher.seed of each point
+    seeds: 3                      # optional: 0, 1, 2 (or a list) as feed.seed and
+                                  # weigher.seed of each point (the sections it has)
 
 A dotted key names a scenario key (``duration``, ``model.d``, ``interactions.enabled``,
 ``weigher.target``, ``solver.rtol``), going into lists by index (``rotation.1.1``,
@@ -68,8 +69,9 @@ RANDOM_KEYS = ('samples', 'seed', 'keys')
 DISTRIBUTIONS = {'uniform': '[a, b] with a < b', 'loguniform': '[a, b] with 0 < a < b',
                  'integers': '[a, b] with integer a <= b (both included)',
                  'choice': 'a non-empty list of values'}
-#: The scenario key that a sweep's seeds set.
-SEED_KEY = 'weigher.seed'
+#: The scenario keys that a sweep's seeds set, each where the scenario has its section:
+#: the feed's draws (pieces, masses, products) and the weigher's load-cell noise.
+SEED_KEYS = ('feed.seed', 'weigher.seed')
 #: The file name of a job's parameter file, beside its scenario.
 PARAMETERS_NAME = 'parameters.yaml'
 
@@ -80,7 +82,8 @@ class Job:
     One run of a sweep: a parameter point and seed, as a scenario ready to run.
 
     name: the job's name (its index, zero-padded: ``00003``); values: the value of every
-    varied key at this job (``weigher.seed`` too when the sweep has seeds); scenario: the
+    varied key at this job (``feed.seed`` and/or ``weigher.seed`` too when the sweep has
+    seeds); scenario: the
     YAML text of the scenario; parameters: the text of its parameter file (``parameters:
     parameters.yaml``: the base scenario's, or the package's default); digest: SHA-256 of
     both texts and of the package's default weigher file (what the job computes).
@@ -322,6 +325,12 @@ def load_sweep(path: str | Path) -> Sweep:
         raise SweepError(f'{path}: {exc}') from exc
 
 
+def _has_section(mapping: Mapping[str, Any], section: str, varied: list[str]) -> bool:
+    """Tell whether a scenario has a section (feed: null is none; weigher: null the default)."""
+    present = (mapping.get(section) is not None if section == 'feed' else section in mapping)
+    return present or any(k.startswith(section + '.') for k in varied)
+
+
 def sweep_from_mapping(content: Any, sweep_dir: Path, source: str = '') -> Sweep:
     """Validate a parsed sweep (relative paths from ``sweep_dir``) and expand its jobs."""
     if not isinstance(content, Mapping):
@@ -337,24 +346,27 @@ def sweep_from_mapping(content: Any, sweep_dir: Path, source: str = '') -> Sweep
     dists, samples = _random(content.get('random'))
     seeds = _seeds(content.get('seeds'))
     keys = list(grid) + list(dists)
+    seed_keys: list[str] = []
     if seeds is not None:
-        keys.append(SEED_KEY)
+        seed_keys = [key for key in SEED_KEYS
+                     if _has_section(base.mapping, key.split('.')[0], [*grid, *dists])]
+        if not seed_keys:
+            raise SweepError('seeds: the scenario has neither a feed: nor a weigher: section; '
+                             f'seeds set {" and ".join(SEED_KEYS)}, the seeds of its only '
+                             'random parts')
+        keys.extend(seed_keys)
     if not keys:
         raise SweepError('a sweep varies something: give grid, random or seeds')
     _check_overlap(keys)
-    if seeds is not None and 'weigher' not in base.mapping and not any(
-            k.startswith('weigher.') for k in [*grid, *dists]):
-        raise SweepError(f'seeds: the scenario has no weigher: section; seeds set {SEED_KEY}, '
-                         "the seed of the weigher's load-cell noise, its only random part")
     # every value of every key alone on the base, so that an error names its key
     for key in keys:
-        if key in grid:
+        if key in seed_keys:
+            tried = seeds[:1]
+        elif key in grid:
             tried = grid[key]
-        elif key in dists:
+        else:
             kind, arg = dists[key]
             tried = arg if kind == 'choice' else list(arg)
-        else:
-            tried = seeds[:1]
         for value in tried:
             base.validate(set_dotted(base.mapping, key, _plain(value)),
                           f'{key} = {value!r}')
@@ -365,7 +377,7 @@ def sweep_from_mapping(content: Any, sweep_dir: Path, source: str = '') -> Sweep
     except OSError as exc:
         raise SweepError(f'cannot read a configuration file: {exc}') from exc
     points = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())]
-    all_values = [{**point, **sample, **({} if seed is None else {SEED_KEY: seed})}
+    all_values = [{**point, **sample, **dict.fromkeys(seed_keys, seed)}
                   for point in points for sample in samples
                   for seed in (seeds if seeds is not None else [None])]
     width = max(5, len(str(len(all_values) - 1)))

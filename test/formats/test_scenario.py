@@ -74,12 +74,30 @@ def test_on_surface_places_the_piece_at_its_resting_gap() -> None:
      "particles[0]: parameter 'm' = 0 is out of range"),
     ({'particles': [{'velocity': [0.0, 0.0, 0.0]}]}, 'particles[0] has no position'),
     ({'solver': {'rtol': 2.0}}, "parameter 'rtol' = 2 is out of range"),
+    ({'feed': {'rate': 2.0, 'speed': 1}}, 'unknown key(s) feed.speed'),
+    ({'feed': {'rate': -2.0}}, 'feed.rate'),
+    ({'feed': {'rate': 2.0, 'rho_max': 0.3}}, 'feed.rho_max = 0.3 m must be inside the cone'),
+    ({'feed': {'rate': 2.0, 'seed': -1}}, 'feed.seed'),
+    ({'feed': {'d_values': 30.0}}, 'feed.d_values must be a list'),
+    ({'feed': [2.0]}, 'feed must be a mapping'),
 ])
 def test_malformed_scenarios_name_the_problem(change: dict, fragment: str) -> None:
     content = {**VALID, **change}
     with pytest.raises(ScenarioError) as info:
         scenario_from_mapping(content)
     assert fragment in str(info.value)
+
+
+def test_a_feed_makes_the_particles_optional() -> None:
+    content = {k: v for k, v in VALID.items() if k != 'particles'}
+    with pytest.raises(ScenarioError, match="missing the key 'particles'"):
+        scenario_from_mapping(content)
+    sc = scenario_from_mapping({**content, 'feed': {'rate': 3.0, 'd_values': [30, 750],
+                                                    'seed': 5}})
+    assert sc.particles == () and sc.feed.rate == 3.0 and sc.feed_seed == 5
+    assert sc.feed.d_values == (30.0, 750.0)
+    assert scenario_from_mapping({**content, 'feed': {}, 'particles': []}).feed.rate == 0.0
+    assert scenario_from_mapping(VALID).feed is None
 
 
 def test_missing_keys_and_files(tmp_path: Path) -> None:

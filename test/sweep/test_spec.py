@@ -89,8 +89,24 @@ def test_seeds_set_the_weigher_seed_of_every_point(tmp_path: Path) -> None:
     assert [(j.values['model.d'], j.values['weigher.seed']) for j in result.jobs] == [
         (30.0, 0), (30.0, 1), (30.0, 2), (750.0, 0), (750.0, 1), (750.0, 2)]
     assert scenario_of(result.jobs[5], tmp_path).weigher.seed == 2
-    with pytest.raises(SweepError, match='seeds: the scenario has no weigher'):
+    with pytest.raises(SweepError, match='seeds: the scenario has neither a feed'):
         sweep(tmp_path, seeds=[0, 1])
+
+
+def test_seeds_set_the_feed_seed_and_the_weigher_seed_together(tmp_path: Path) -> None:
+    base = {**BASE, 'particles': [], 'feed': {'rate': 5.0}, 'weigher': {}}
+    result = sweep_from_mapping({'scenario': base, 'seeds': [4, 9]}, tmp_path)
+    assert result.keys == ('feed.seed', 'weigher.seed')
+    assert [j.values for j in result.jobs] == [{'feed.seed': 4, 'weigher.seed': 4},
+                                               {'feed.seed': 9, 'weigher.seed': 9}]
+    scenario = scenario_of(result.jobs[1], tmp_path)
+    assert (scenario.feed_seed, scenario.weigher.seed, scenario.feed.rate) == (9, 9, 5.0)
+    feed_only = sweep_from_mapping({'scenario': {**base, 'weigher': None, 'feed': {'rate': 1.0}},
+                                    'seeds': 2}, tmp_path)
+    assert feed_only.keys == ('feed.seed', 'weigher.seed')  # weigher: null is the default one
+    no_weigher = {k: v for k, v in base.items() if k != 'weigher'}
+    assert sweep_from_mapping({'scenario': no_weigher, 'seeds': 2}, tmp_path).keys == (
+        'feed.seed',)
 
 
 def test_interactions_and_weigher_keys(tmp_path: Path) -> None:
