@@ -45,3 +45,7 @@ class ReportError(ConeFeederError):
 
 class SweepError(ConeFeederError, ValueError):
     """A sweep file is malformed, or its output directory holds another sweep's results."""
+
+
+class EnvConfigError(ConeFeederError, ValueError):
+    """A reinforcement-learning environment's configuration is malformed (the key is named)."""
