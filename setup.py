@@ -36,7 +36,8 @@ setup(
     install_requires=['setuptools', 'numpy>=1.23.2', 'numba>=0.57', 'pyyaml>=6.0',
                       'mcap>=1.6.0', 'rosbags>=0.10.8', 'matplotlib>=3.6'],
     # `cone-feeder-sim sweep` runs on Dask (dask.distributed); only the sweep needs it.
-    extras_require={'sweep': ['dask[distributed]>=2024.1']},
+    extras_require={'sweep': ['dask[distributed]>=2024.1'],
+                    'rl': ['gymnasium>=1.0', 'stable-baselines3>=2.4']},
     python_requires='>=3.11',
     zip_safe=True,
     maintainer='cone_feeder_sim maintainers',

@@ -15,8 +15,8 @@
 """
 The rooms of the package import one way (doc/architecture.md).
 
-physics <- feeder <- formats <- ros, report, sweep <- cli: a module imports only from its own room
-and the rooms before it; physics imports no rclpy, mcap or yaml; nothing below ros imports
+physics <- feeder <- formats <- ros, report, sweep, rl <- cli: a module imports only from its own
+room and the rooms before it; physics imports no rclpy, mcap or yaml; nothing below ros imports
 rclpy or ROS message packages.
 """
 
@@ -28,10 +28,12 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / 'cone_feeder_sim'
 #: Rank of each room; physics and weigher, ros, report and sweep are side by side.
 RANK = {'errors': 0, '__init__': 0, 'physics': 1, 'weigher': 1, 'feeder': 2, 'formats': 3,
-        'ros': 4, 'report': 4, 'sweep': 4, 'cli': 5}
-SIDE_BY_SIDE = ('ros', 'report', 'sweep')
+        'ros': 4, 'report': 4, 'sweep': 4, 'rl': 4, 'cli': 5}
+SIDE_BY_SIDE = ('ros', 'report', 'sweep', 'rl')
 #: The optional dependency of the sweep: imported by its Dask modules only.
 DASK_MODULES = {'sweep/cluster.py', 'sweep/run.py'}
+#: The optional dependencies of the RL environment, and the modules that may import them.
+RL_PACKAGES = {'gymnasium': 'rl/', 'stable_baselines3': 'rl/sb3.py', 'torch': 'rl/sb3.py'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs', 'geometry_msgs',
                 'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'builtin_interfaces'}  # ament_index_python: an optional look-up of files
@@ -78,6 +80,9 @@ def test_imports_run_one_way(path: Path) -> None:
             assert top not in ROS_PACKAGES, f'{source} imports {top}'
         if str(path.relative_to(PACKAGE)) not in DASK_MODULES:
             assert top not in {'dask', 'distributed'}, f'{path.name} imports {top}'
+        for package, where in RL_PACKAGES.items():
+            assert top != package or str(path.relative_to(PACKAGE)).startswith(where), (
+                f'{path.name} imports {top}')
         if source == 'physics':
             assert top not in {'mcap', 'yaml', 'rosbags', 'matplotlib'}, top
 

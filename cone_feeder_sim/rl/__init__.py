@@ -27,8 +27,9 @@ import gymnasium
 
 from .config import EnvConfig, load_env_config
 from .env import ConeFeederEnv
+from .vector import ConeFeederVectorEnv
 
-__all__ = ['ConeFeederEnv', 'EnvConfig', 'ENV_ID', 'load_env_config']
+__all__ = ['ConeFeederEnv', 'ConeFeederVectorEnv', 'EnvConfig', 'ENV_ID', 'load_env_config']
 
 #: The registered id; ``cone_feeder_sim.rl:ConeFeeder-v0`` imports this package first.
 ENV_ID = 'cone_feeder_sim/ConeFeeder-v0'
@@ -37,4 +38,4 @@ for _id in (ENV_ID, 'ConeFeeder-v0'):
     # 'module:ConeFeeder-v0' looks 'ConeFeeder-v0' up after importing the module
     if _id not in gymnasium.registry:
         gymnasium.register(id=_id, entry_point='cone_feeder_sim.rl.env:ConeFeederEnv',
-                           disable_env_checker=False)
+                           vector_entry_point='cone_feeder_sim.rl.vector:ConeFeederVectorEnv')

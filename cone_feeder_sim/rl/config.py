@@ -31,7 +31,7 @@ from typing import Any
 
 from ..errors import ConeFeederError, EnvConfigError
 from ..feeder.engine import DriveParams, EngineConfig
-from ..feeder.feed import check_feed_fits, FEED_KEYS, feed_from_mapping
+from ..feeder.feed import check_feed_fits, feed_from_mapping, FEED_KEYS
 from ..formats.parameter_file import config_dir, load_model_params, load_weigher_params, read_yaml
 from ..physics.params import (
     check_integer, check_number, interaction_params_from_mapping, Limit,

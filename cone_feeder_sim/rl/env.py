@@ -144,13 +144,14 @@ class ConeFeederEnv(gymnasium.Env):
     """
     The cone feeder as a Gymnasium environment (see the module documentation).
 
-    Args:
-        config: the configuration: None (``config/rl.yaml``), the path of a YAML file with
-            keys of ``config/rl.yaml`` (the rest keep the defaults), a mapping of such keys,
-            or an :class:`~cone_feeder_sim.rl.config.EnvConfig`.
-        render_mode: None (no rendering yet: issue 22 brings the view).
-        **overrides: keys of ``config/rl.yaml`` merged over ``config`` (sections key by
-            key), e.g. ``episode_time=10.0, interactions={'enabled': True}``.
+    The arguments:
+
+    config: the configuration: None (``config/rl.yaml``), the path of a YAML file with
+    keys of ``config/rl.yaml`` (the rest keep the defaults), a mapping of such keys,
+    or an :class:`~cone_feeder_sim.rl.config.EnvConfig`.
+    render_mode: None (no rendering yet: issue 22 brings the view).
+    **overrides: keys of ``config/rl.yaml`` merged over ``config`` (sections key by
+    key), e.g. ``episode_time=10.0, interactions={'enabled': True}``.
 
     Raises EnvConfigError naming the key of a bad configuration.
     """
