@@ -65,79 +65,25 @@ high rate) before the episode's clock starts.
 
 from collections.abc import Mapping
 from dataclasses import replace
-import math
 from pathlib import Path
 from typing import Any
 
 import gymnasium
-from gymnasium import spaces
 import numpy as np
 
 from .config import EnvConfig, load_env_config
+from .spaces import (
+    action_space, decode_action, features, mass_grid, observation_space, piece_rows)
 from ..errors import EnvConfigError
 from ..feeder.engine import ChannelFeed, FeederEngine
-from ..physics.params import P_M, PRODUCT_LIMITS
+from ..physics.params import P_M
 
-__all__ = ['ConeFeederEnv', 'observation_space', 'action_space']
+__all__ = ['ConeFeederEnv']
 
 #: Largest fill rate (pieces per tick, mean) of the drop of the initial pieces.
 FILL_TICKS = 4
 #: Most ticks the initial drop may take before a reset gives up.
 MAX_FILL_TICKS = 10_000
-#: Bounds of the padded piece rows (observation: dict): |x|, |y| (m), z (m), |v| (m/s).
-PIECE_XY = 1.0
-PIECE_Z = (-1.0, 20.0)
-PIECE_SPEED = 50.0
-#: Columns of a piece row.
-PIECE_COLUMNS = ('x', 'y', 'z', 'vx', 'vy', 'vz', 'm')
-
-
-def feature_bounds(config: EnvConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Return the low and high bounds of the feature vector (F,) float32."""
-    channels = config.engine.model.channels.count
-    heads = channels if config.engine.weigher is not None else 0
-    clip = config.obs_clip
-    cells = config.grid[0] * config.grid[1]
-    low = np.concatenate([[-1.0, -1.0, -1.0], np.full(channels, -clip), np.zeros(heads),
-                          np.zeros(cells)])
-    high = np.concatenate([[1.0, 1.0, 1.0], np.full(channels, clip), np.full(heads, clip),
-                           np.full(cells, clip)])
-    return low.astype(np.float32), high.astype(np.float32)
-
-
-def piece_bounds(config: EnvConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Return the low and high bounds of one piece row (7,) float32."""
-    low = [-PIECE_XY, -PIECE_XY, PIECE_Z[0]] + [-PIECE_SPEED] * 3 + [0.0]
-    high = [PIECE_XY, PIECE_XY, PIECE_Z[1]] + [PIECE_SPEED] * 3 + [PRODUCT_LIMITS['m'].hi]
-    return np.array(low, dtype=np.float32), np.array(high, dtype=np.float32)
-
-
-def observation_space(config: EnvConfig) -> spaces.Space:
-    """Return the observation space of a configuration."""
-    low, high = feature_bounds(config)
-    features = spaces.Box(low, high, dtype=np.float32)
-    if config.observation == 'grid':
-        return features
-    rows = config.max_pieces_observed
-    plow, phigh = piece_bounds(config)
-    return spaces.Dict({
-        'features': features,
-        'pieces': spaces.Box(np.tile(plow, (rows, 1)), np.tile(phigh, (rows, 1)),
-                             dtype=np.float32),
-        'mask': spaces.MultiBinary(rows)})
-
-
-def action_space(config: EnvConfig) -> spaces.Space:
-    """Return the action space of a configuration."""
-    if config.action == 'discrete':
-        return spaces.Discrete(3)
-    limit = config.engine.drive.max_angular_velocity
-    size = 1 + (config.engine.model.channels.count if config.feed_amplitudes else 0)
-    if config.normalize_actions:
-        return spaces.Box(-1.0, 1.0, shape=(size,), dtype=np.float32)
-    low = np.concatenate([[-limit], np.zeros(size - 1)]).astype(np.float32)
-    high = np.concatenate([[limit], np.full(size - 1, 2.0)]).astype(np.float32)
-    return spaces.Box(low, high, dtype=np.float32)
 
 
 class ConeFeederEnv(gymnasium.Env):
@@ -176,8 +122,6 @@ class ConeFeederEnv(gymnasium.Env):
         model = self.config.engine.model
         self._m_ref = model.product.m
         self._targets = np.array(self.config.channel_targets)
-        self._low, self._high = feature_bounds(self.config)
-        self._plow, self._phigh = piece_bounds(self.config)
         self._engine: FeederEngine | None = None
         self._steps = 0
         self._t0 = 0.0
@@ -226,7 +170,7 @@ class ConeFeederEnv(gymnasium.Env):
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """Hold the action's target for a control period; return (obs, r, False, trunc, info)."""
         engine = self.engine
-        omega, amplitudes = self._decode(action)
+        omega, amplitudes = decode_action(self.config, self.action_space, action)
         engine.command(omega)
         if amplitudes is not None:
             engine.submit(ChannelFeed(amplitudes))
@@ -242,25 +186,6 @@ class ConeFeederEnv(gymnasium.Env):
         truncated = self._steps >= self.config.episode_steps
         info = self._info(terms, packs, giveaway, exits, failures)
         return self._observation(), float(terms.sum()), False, truncated, info
-
-    def _decode(self, action: Any) -> tuple[float, tuple[float, ...] | None]:
-        if self.config.action == 'discrete':
-            index = int(np.asarray(action).reshape(()))
-            if index not in (0, 1, 2):
-                raise ValueError(f'a discrete action is 0 (cw), 1 (stop) or 2 (ccw), got '
-                                 f'{action!r}')
-            return (index - 1) * self.config.discrete_omega, None
-        values = np.asarray(action, dtype=np.float64).reshape(-1)
-        if values.shape != self.action_space.shape or not np.all(np.isfinite(values)):
-            raise ValueError(f'an action is {self.action_space.shape[0]} finite numbers, got '
-                             f'{action!r}')
-        values = np.clip(values, self.action_space.low, self.action_space.high)
-        if self.config.normalize_actions:
-            values = values + 1.0
-            values[0] = (values[0] - 1.0) * self.config.engine.drive.max_angular_velocity
-        if self.config.feed_amplitudes:
-            return float(values[0]), tuple(float(v) for v in values[1:])
-        return float(values[0]), None
 
     # ------------------------------------------------------------------ reward and info
 
@@ -292,41 +217,20 @@ class ConeFeederEnv(gymnasium.Env):
     def features(self) -> np.ndarray:
         """Return the feature vector (F,) float32 of the current state (see the module)."""
         engine = self.engine
-        config = self.config
-        m = self._m_ref
-        parts = [np.array([engine.omega / config.engine.drive.max_angular_velocity,
-                           math.sin(engine.angle), math.cos(engine.angle)]),
-                 self.deficit() / m]
-        if engine.weigher is not None:
-            parts.append(engine.weigher.hopper_readings() / m)
-        parts.append(self.mass_grid().reshape(-1) / m)
-        values = np.concatenate(parts)
-        return np.clip(values, self._low, self._high).astype(np.float32)
+        state = engine.state
+        hoppers = engine.weigher.hopper_readings() if engine.weigher is not None else None
+        return features(self.config, engine.omega, engine.angle, self.deficit(), hoppers,
+                        state.y[:, 0:2], state.products[:, P_M])
 
     def mass_grid(self) -> np.ndarray:
         """Return the mass on the cone (radial, angular) kg in the cone's frame."""
         state = self.engine.state
-        radial, angular = self.config.grid
-        x, y = state.y[:, 0], state.y[:, 1]
-        rim = self.config.engine.model.r
-        i = np.minimum((np.hypot(x, y) / rim * radial).astype(np.int64), radial - 1)
-        phase = np.mod(np.arctan2(y, x), 2.0 * math.pi) / (2.0 * math.pi)
-        j = np.minimum((phase * angular).astype(np.int64), angular - 1)
-        cells = np.bincount(i * angular + j, weights=state.products[:, P_M],
-                            minlength=radial * angular)
-        return cells.reshape(radial, angular)
+        return mass_grid(self.config, state.y[:, 0:2], state.products[:, P_M])
 
     def _observation(self) -> Any:
-        features = self.features()
-        if self.config.observation == 'grid':
-            return features
         state = self.engine.state
-        rows = self.config.max_pieces_observed
-        count = min(rows, state.count)
-        pieces = np.zeros((rows, len(PIECE_COLUMNS)), dtype=np.float32)
-        pieces[:count, :6] = state.y[:count, :6]
-        pieces[:count, 6] = state.products[:count, P_M]
-        pieces[:count] = np.clip(pieces[:count], self._plow, self._phigh)
-        mask = np.zeros(rows, dtype=np.int8)
-        mask[:count] = 1
-        return {'features': features, 'pieces': pieces, 'mask': mask}
+        obs = self.features()
+        if self.config.observation == 'grid':
+            return obs
+        return {'features': obs, **piece_rows(self.config, state.y[:, 0:6],
+                                              state.products[:, P_M])}
