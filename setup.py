@@ -52,6 +52,7 @@ setup(
             'sim_node = cone_feeder_sim.ros.sim_node:main',
             'replay_node = cone_feeder_sim.ros.replay_node:main',
             'example_controller = cone_feeder_sim.ros.example_controller:main',
+            'policy_controller = cone_feeder_sim.ros.policy_controller:main',
         ],
     },
 )

@@ -15,9 +15,9 @@
 """
 The rooms of the package import one way (doc/architecture.md).
 
-physics <- feeder <- formats <- ros, report, sweep, rl <- cli: a module imports only from its own
-room and the rooms before it; physics imports no rclpy, mcap or yaml; nothing below ros imports
-rclpy or ROS message packages.
+physics <- feeder <- formats <- report, sweep, rl <- ros, cli: a module imports only from its
+own room and the rooms before it (ros uses rl in policy_controller only); physics imports no
+rclpy, mcap or yaml; nothing below ros imports rclpy or ROS message packages.
 """
 
 import ast
@@ -28,12 +28,16 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / 'cone_feeder_sim'
 #: Rank of each room; physics and weigher, ros, report and sweep are side by side.
 RANK = {'errors': 0, '__init__': 0, 'physics': 1, 'weigher': 1, 'feeder': 2, 'formats': 3,
-        'ros': 4, 'report': 4, 'sweep': 4, 'rl': 4, 'cli': 5}
-SIDE_BY_SIDE = ('ros', 'report', 'sweep', 'rl')
+        'report': 4, 'sweep': 4, 'rl': 4, 'ros': 5, 'cli': 5}
+SIDE_BY_SIDE = ('report', 'sweep', 'rl')
+#: Rooms that must not import each other although one ranks after the other.
+APART = {('ros', 'report'), ('ros', 'sweep'), ('cli', 'ros')}
 #: The optional dependency of the sweep: imported by its Dask modules only.
 DASK_MODULES = {'sweep/cluster.py', 'sweep/run.py'}
 #: The optional dependencies of the RL environment, and the modules that may import them.
 RL_PACKAGES = {'gymnasium': 'rl/', 'stable_baselines3': 'rl/sb3.py', 'torch': 'rl/sb3.py'}
+#: The one ROS module that uses the RL room (and so gymnasium and stable-baselines3).
+RL_USERS = {'ros/policy_controller.py'}
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs', 'geometry_msgs',
                 'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'builtin_interfaces'}  # ament_index_python: an optional look-up of files
@@ -76,6 +80,9 @@ def test_imports_run_one_way(path: Path) -> None:
             assert RANK[target] <= RANK[source], f'{source} imports {target}'
             assert source == target or not {source, target} <= set(SIDE_BY_SIDE), (
                 f'{source} imports {target}')
+            assert (source, target) not in APART, f'{source} imports {target}'
+        if target == 'rl' and source != 'rl':
+            assert str(path.relative_to(PACKAGE)) in RL_USERS, f'{path.name} imports rl'
         if RANK[source] < RANK['ros']:
             assert top not in ROS_PACKAGES, f'{source} imports {top}'
         if str(path.relative_to(PACKAGE)) not in DASK_MODULES:

@@ -73,7 +73,7 @@ import numpy as np
 
 from .config import EnvConfig, load_env_config
 from .spaces import (
-    action_space, decode_action, features, mass_grid, observation_space, piece_rows)
+    action_space, decode_action, features, mass_grid, observation, observation_space)
 from ..errors import EnvConfigError
 from ..feeder.engine import ChannelFeed, FeederEngine
 from ..physics.params import P_M
@@ -228,9 +228,8 @@ class ConeFeederEnv(gymnasium.Env):
         return mass_grid(self.config, state.y[:, 0:2], state.products[:, P_M])
 
     def _observation(self) -> Any:
-        state = self.engine.state
-        obs = self.features()
-        if self.config.observation == 'grid':
-            return obs
-        return {'features': obs, **piece_rows(self.config, state.y[:, 0:6],
-                                              state.products[:, P_M])}
+        engine = self.engine
+        state = engine.state
+        hoppers = engine.weigher.hopper_readings() if engine.weigher is not None else None
+        return observation(self.config, engine.omega, engine.angle, self.deficit(), hoppers,
+                           state.y[:, 0:6], state.products[:, P_M])

@@ -30,9 +30,26 @@ from typing import Any
 import gymnasium
 from gymnasium.vector.utils import iterate
 import numpy as np
+import stable_baselines3
 from stable_baselines3.common.vec_env import VecEnv
 
-__all__ = ['SB3VecEnv']
+from ..errors import EnvConfigError
+
+__all__ = ['load_policy', 'SB3VecEnv']
+
+#: The stable-baselines3 algorithms a saved policy may come from.
+ALGORITHMS = ('A2C', 'DDPG', 'DQN', 'PPO', 'SAC', 'TD3')
+
+
+def load_policy(path: str, algorithm: str = 'PPO') -> Any:
+    """Load a saved stable-baselines3 model (``model.predict(obs)``) on the CPU."""
+    if algorithm not in ALGORITHMS:
+        raise EnvConfigError(f'algorithm must be one of {", ".join(ALGORITHMS)}, got '
+                             f'{algorithm!r}')
+    try:
+        return getattr(stable_baselines3, algorithm).load(path, device='cpu')
+    except (OSError, ValueError, KeyError) as exc:
+        raise EnvConfigError(f'cannot load the {algorithm} policy {path}: {exc}') from exc
 
 
 class SB3VecEnv(VecEnv):

@@ -32,7 +32,7 @@ from .config import EnvConfig
 from ..physics.params import PRODUCT_LIMITS
 
 __all__ = ['action_space', 'decode_action', 'feature_bounds', 'features', 'mass_grid',
-           'observation_space', 'piece_rows', 'PIECE_COLUMNS']
+           'observation', 'observation_space', 'piece_rows', 'PIECE_COLUMNS']
 
 
 def feature_bounds(config: EnvConfig) -> tuple[np.ndarray, np.ndarray]:
@@ -172,3 +172,18 @@ def decode_action(config: EnvConfig, space: spaces.Space,
     if config.feed_amplitudes:
         return float(values[0]), tuple(float(v) for v in values[1:])
     return float(values[0]), None
+
+
+def observation(config: EnvConfig, omega: float, angle: float, deficit: np.ndarray,
+                hoppers: np.ndarray | None, states: np.ndarray, masses: np.ndarray) -> Any:
+    """
+    Return what the environment observes: a Box's array, or the Dict's mapping.
+
+    omega (rad/s), angle (rad); deficit (channels,) kg; hoppers (heads,) kg or None;
+    states (N, 6): positions (m) and velocities relative to the cone (m/s) in the cone's
+    frame, in id order; masses (N,) kg.
+    """
+    obs = features(config, omega, angle, deficit, hoppers, states[:, 0:2], masses)
+    if config.observation == 'grid':
+        return obs
+    return {'features': obs, **piece_rows(config, states, masses)}
