@@ -125,6 +125,8 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
+from .diagnostics import (
+    DiagnosticsWindow, recording_status, simulation_status, weigher_status)
 from .guarded_node import GuardedNode
 from .pacing import Pacer
 from .parameters import (
@@ -152,7 +154,6 @@ from ..formats.topics import MessageRecord, QosProfile, TOPICS
 from ..physics.integrator import set_threads
 from ..physics.params import ModelParams
 from ..physics.simulation import position_problems
-from ..weigher.machine import WeigherStats
 
 __all__ = ['SimNode', 'TopicInfo', 'main']
 
@@ -188,26 +189,6 @@ class _Output:
     topic: str
     type_name: str
     encode: Callable[[Any], bytes]
-
-
-class _Window:
-    """Counters of the current diagnostics window."""
-
-    def __init__(self, wall: float, sim: float) -> None:
-        self.wall0 = wall
-        self.sim0 = sim
-        self.ticks = 0
-        self.step_s = 0.0
-        self.step_max = 0.0
-        self.publish_s = 0.0
-        self.callback_max = 0.0
-        self.overruns = 0
-        self.lag_max = 0.0
-        self.given_up = 0.0
-        self.accepted = 0
-        self.rejected = 0
-        self.largest_island = 0
-        self.pairs_left_out = 0
 
 
 class SimNode(GuardedNode):
@@ -265,7 +246,7 @@ class SimNode(GuardedNode):
         self._refused = 0
         self._last_tick: TickResult | None = None
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._window = _Window(time.perf_counter(), self._engine.t)
+        self._window = DiagnosticsWindow(time.perf_counter(), self._engine.t)
         self._timing = [0, 0.0, 0.0]  # ticks, step s, publish s since the start
         # the worker may be ticks ahead: the node's time is that of the last published tick
         # (stamps of events, received messages and diagnostics, so log times never go back)
@@ -711,7 +692,7 @@ class SimNode(GuardedNode):
             return 'already running'
         self._paused = False
         self._anchored = False
-        self._window = _Window(time.perf_counter(), self._engine.t)
+        self._window = DiagnosticsWindow(time.perf_counter(), self._engine.t)
         self._tick_timer.reset()
         self._node_event('resume')
         return f'resumed at t = {self._engine.t:.6f} s'
@@ -770,7 +751,7 @@ class SimNode(GuardedNode):
             self._pacer.rtf = float(values['real_time_factor'])
             self._tick_timer.timer_period_ns = int(round(self._timer_period() * 1e9))
             self._anchored = False
-            self._window = _Window(time.perf_counter(), self._engine.t)
+            self._window = DiagnosticsWindow(time.perf_counter(), self._engine.t)
         if 'catch_up' in names:
             self._pacer.catch_up = float(values['catch_up'])
         index = self._engine.tick_index  # the next tick the worker starts
@@ -910,112 +891,22 @@ class SimNode(GuardedNode):
 
     # ------------------------------------------------------------------ diagnostics
 
-    def _weigher_status(self, stats: WeigherStats) -> dict[str, Any]:
-        """Return the diagnostic status of the weigher: its pack statistics so far."""
-        values = {
-            'packs': str(stats.packs),
-            'packs per minute': f'{stats.packs_per_minute:.2f}',
-            'giveaway mean (g)': f'{1e3 * stats.giveaway_mean:.2f}',
-            'giveaway std (g)': f'{1e3 * stats.giveaway_std:.2f}',
-            'under target (fraction)': f'{stats.under_target:.4f}',
-            'below target - TNE (fraction)': f'{stats.below_tne:.4f}',
-            'starved heads per cycle': f'{stats.starved_per_cycle:.2f}',
-            'cycles': str(stats.cycles),
-        }
-        level = 1 if stats.below_tne > 0.0 else 0
-        message = (f'{stats.packs} packs, {stats.packs_per_minute:.1f}/min, giveaway '
-                   f'{1e3 * stats.giveaway_mean:.1f} g')
-        return {'level': level, 'name': f'{self.get_fully_qualified_name()}: weigher',
-                'message': message, 'hardware_id': 'cone_feeder',
-                'values': [{'key': k, 'value': v} for k, v in values.items()]}
-
-    def _recording_status(self) -> dict[str, Any]:
-        """Return the diagnostic status of the recording: OK, off, or ERROR once it stopped."""
-        recorder = self._recorder
-        values = {}
-        if self._recording_error is not None:
-            level, message = 2, f'recording stopped: {self._recording_error}'
-        elif recorder is None:
-            level, message = 0, 'not recording'
-        else:
-            level, message = 0, f'recording to {recorder.paths[-1]}'
-        if recorder is not None:
-            values = {'files': str(len(recorder.paths)),
-                      'messages written': str(recorder.message_count),
-                      'first file': str(recorder.path)}
-        return {'level': level, 'name': f'{self.get_fully_qualified_name()}: recording',
-                'message': message, 'hardware_id': 'cone_feeder',
-                'values': [{'key': k, 'value': v} for k, v in values.items()]}
-
     def _publish_diagnostics(self) -> None:
         now = time.perf_counter()
-        window = self._window
-        wall = now - window.wall0
-        sim = self._engine.t - window.sim0
-        achieved = sim / wall if wall > 0 else 0.0
-        ticks = max(window.ticks, 1)
-        level = 0
-        rtf = self._pacer.rtf
-        if self._paused:
-            message = f'paused at t = {self._engine.t:.3f} s'
-        elif rtf == 0.0:
-            message = f'running as fast as possible: real-time factor {achieved:.2f}'
-        elif window.ticks and (window.given_up > 0.0 or achieved < 0.9 * rtf):
-            level = 1
-            message = (f'cannot keep up: real-time factor {achieved:.2f} < {rtf:g} '
-                       f'(tick {1e3 * window.step_s / ticks:.3g} ms, longest '
-                       f'{1e3 * window.step_max:.3g} ms, period {1e3 * self._pacer.period:.3g} '
-                       f'ms); {window.given_up:.3g} s beyond catch_up = '
-                       f'{self._pacer.catch_up:g} s given up: simulation time runs slower')
-        else:
-            message = f'real-time factor {achieved:.2f} (target {rtf:g})'
-        if window.pairs_left_out and not self._paused:
-            level = 1
-            message += (f'; a contact island of {window.largest_island} pieces was cut into '
-                        f'parts of at most interactions.max_island = '
-                        f'{self._engine.config.model.interactions.max_island}: '
-                        f'{window.pairs_left_out} pairs left out')
+        name = self.get_fully_qualified_name()
         res = self._last_tick
-        values = {
-            'simulation time (s)': f'{self._engine.t:.6f}',
-            'paused': str(self._paused),
-            'real-time factor (achieved)': f'{achieved:.4f}',
-            'real-time factor (target)': f'{rtf:g}',
-            'update rate (Hz)': f'{1.0 / self._engine.dt:g}',
-            'ticks in window': str(window.ticks),
-            'step time mean (ms)': f'{1e3 * window.step_s / ticks:.3f}',
-            'step time max (ms)': f'{1e3 * window.step_max:.3f}',
-            'publish time mean (ms)': f'{1e3 * window.publish_s / ticks:.3f}',
-            'overruns (ticks longer than the period)': str(window.overruns),
-            'lag behind the wall clock max (ms)': f'{1e3 * window.lag_max:.3f}',
-            'time given up (s)': f'{window.given_up:.3f}',
-            'executor callback max (ms)': f'{1e3 * window.callback_max:.3f}',
-            'pieces': str(self._engine.piece_count),
-            'accepted steps': str(window.accepted),
-            'rejected steps': str(window.rejected),
-            'largest contact island (pieces)': str(window.largest_island),
-            'contact pairs left out (island cut)': str(window.pairs_left_out),
-            'exits (total)': str(self._total_exits),
-            'failures (total)': str(self._total_failures),
-            'mass in (kg)': f'{res.mass_in:.6f}' if res is not None else '0',
-            'mass exited (kg)': f'{res.channel_mass.sum():.6f}' if res is not None else '0',
-            'mass failed (kg)': f'{res.failed_mass:.6f}' if res is not None else '0',
-            'refused inputs (total)': str(self._refused),
-            'cone omega (rad/s)': f'{self._engine.omega:.4f}',
-            'drive mode': res.mode if res is not None else 'not started',
-        }
-        message_dict = {
-            'header': {'stamp': stamp(self._published_t), 'frame_id': ''},
-            'status': [{'level': level,
-                        'name': f'{self.get_fully_qualified_name()}: simulation',
-                        'message': message, 'hardware_id': 'cone_feeder',
-                        'values': [{'key': k, 'value': v} for k, v in values.items()]},
-                       self._recording_status()]}
+        statuses = [
+            simulation_status(name, self._window, now, self._engine, self._pacer,
+                              self._paused, res, self._total_exits, self._total_failures,
+                              self._refused),
+            recording_status(name, self._recorder, self._recording_error)]
         if res is not None and res.weigher_stats is not None:
-            message_dict['status'].append(self._weigher_status(res.weigher_stats))
-        self._publish(self._pub_diag, message_dict, self._now_ns())
+            statuses.append(weigher_status(name, res.weigher_stats))
+        self._publish(self._pub_diag, {
+            'header': {'stamp': stamp(self._published_t), 'frame_id': ''},
+            'status': statuses}, self._now_ns())
         if not self._paused:
-            self._window = _Window(now, self._engine.t)
+            self._window = DiagnosticsWindow(now, self._engine.t)
 
 
 def main(args: list[str] | None = None) -> int:
