@@ -65,6 +65,28 @@ def test_run_writes_one_row_per_exit(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert '100.0%' in err  # the progress bar reached the end
 
 
+def test_run_with_a_feed_and_no_particles(tmp_path: Path,
+                                          capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / 'fed.yaml'
+    scenario.write_text('duration: 1.5\nrotation: [[0.0, -10.47]]\n'
+                        'feed: {rate: 30.0, seed: 4}\n')
+    events = tmp_path / 'events.csv'
+    mcap_path = tmp_path / 'fed.mcap'
+    assert main(['run', str(scenario), '--events', str(events), '--mcap', str(mcap_path),
+                 '--quiet']) == 0
+    with events.open() as stream:
+        rows = list(csv.DictReader(stream))
+    result = run_scenario(scenario_from_mapping(
+        {'duration': 1.5, 'rotation': [[0.0, -10.47]], 'feed': {'rate': 30.0, 'seed': 4}}))
+    assert len(rows) == result.exit_table()['ids'].size > 0
+    err = capsys.readouterr().err
+    assert f'{len(rows)} of {result.pieces} pieces left the cone' in err
+    with mcap_path.open('rb') as stream:
+        metadata = next(m for m in mcap.reader.make_reader(stream).iter_metadata()
+                        if m.name == 'cone_feeder_sim').metadata
+    assert (metadata['feed.rate'], metadata['feed.seed'], metadata['seed']) == ('30.0', '4', '4')
+
+
 def test_packs_csv_of_a_scenario_with_a_weigher(tmp_path: Path,
                                                 capsys: pytest.CaptureFixture) -> None:
     from cone_feeder_sim.formats.packs_csv import PACK_COLUMNS
