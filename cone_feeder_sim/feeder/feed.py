@@ -29,7 +29,6 @@ A feed in a file (a scenario's ``feed:``, ``config/rl.yaml``) has the node's key
 (:data:`FEED_KEYS`, ``feed.<key>`` there); keys left out take :class:`FeedParams`' defaults.
 """
 
-from collections.abc import Mapping
 from dataclasses import dataclass, fields
 import math
 from typing import Any
@@ -38,7 +37,8 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..physics.params import (
-    check_integer, check_number, Limit, ModelParams, PRODUCT_LIMITS, ProductParams)
+    check_integer, check_number, check_section, Limit, ModelParams, PRODUCT_LIMITS,
+    ProductParams)
 
 __all__ = ['FEED_KEYS', 'FEED_LIMITS', 'FeedDrop', 'FeedParams', 'check_feed_fits',
            'draw_feed', 'feed_from_mapping']
@@ -115,13 +115,7 @@ def feed_from_mapping(content: Any, where: str = 'feed') -> tuple[FeedParams, in
 
     Unknown keys and invalid values raise ParameterError naming the key (``where.key``).
     """
-    if not isinstance(content, Mapping):
-        raise ParameterError(f'{where} must be a mapping with the keys {", ".join(FEED_KEYS)}, '
-                             f'got {content!r}')
-    unknown = sorted(str(k) for k in set(content) - set(FEED_KEYS))
-    if unknown:
-        raise ParameterError(f'unknown key(s) {", ".join(f"{where}.{k}" for k in unknown)}; '
-                             f'known: {", ".join(FEED_KEYS)}')
+    check_section(where, content, FEED_KEYS)
     values = {k: v for k, v in content.items() if k != 'seed'}
     if 'd_values' in values:
         d_values = values['d_values']

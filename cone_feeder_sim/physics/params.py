@@ -24,7 +24,7 @@ mix products: :class:`ProductParams` holds one product, and the simulator stores
 :func:`product_row` per particle.
 """
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields, replace
 import math
 from typing import Any
@@ -398,18 +398,28 @@ class ModelParams:
 INTERACTION_KEYS = ('enabled', 'pull_off', 'max_island', 'coupling', 'coupling_tolerance')
 
 
+def check_section(section: str, mapping: Any, keys: Sequence[str]) -> Mapping[str, Any]:
+    """
+    Return ``mapping`` after checking it is a mapping of some of ``keys``.
+
+    Raises ParameterError naming the section and the unknown keys (the one check of every
+    section of a file: interactions, a scenario's feed, the RL environment's sections).
+    """
+    if not isinstance(mapping, Mapping):
+        raise ParameterError(f'{section} must be a mapping with keys {", ".join(keys)}, got '
+                             f'{mapping!r}')
+    unknown = sorted(str(k) for k in set(mapping) - set(keys))
+    if unknown:
+        raise ParameterError(f'unknown {section} key(s) {", ".join(map(repr, unknown))}; '
+                             f'known: {", ".join(keys)}')
+    return mapping
+
+
 def interaction_params_from_mapping(mapping: Any,
                                     base: InteractionParams | None = None) -> InteractionParams:
     """Build validated contact settings from an ``interactions`` mapping over ``base``."""
     base = base if base is not None else InteractionParams()
-    if not isinstance(mapping, Mapping):
-        raise ParameterError(f'interactions must be a mapping with keys '
-                             f'{", ".join(INTERACTION_KEYS)}, got {mapping!r}')
-    unknown = sorted(str(k) for k in set(mapping) - set(INTERACTION_KEYS))
-    if unknown:
-        raise ParameterError(f'unknown interactions key(s) {", ".join(map(repr, unknown))}; '
-                             f'known: {", ".join(INTERACTION_KEYS)}')
-    return replace(base, **dict(mapping))
+    return replace(base, **dict(check_section('interactions', mapping, INTERACTION_KEYS)))
 
 
 MODEL_KEYS = ('g', 'cone_diameter', 'cone_tilt', 'epsilon', 'tip_epsilon', 'normal_force',

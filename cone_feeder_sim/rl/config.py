@@ -34,7 +34,7 @@ from ..feeder.engine import DriveParams, EngineConfig
 from ..feeder.feed import check_feed_fits, feed_from_mapping, FEED_KEYS
 from ..formats.parameter_file import config_dir, load_model_params, load_weigher_params, read_yaml
 from ..physics.params import (
-    check_integer, check_number, interaction_params_from_mapping, Limit,
+    check_integer, check_number, check_section, interaction_params_from_mapping, Limit,
     solver_params_from_mapping)
 from ..weigher.machine import check_machine
 
@@ -137,16 +137,7 @@ class EnvConfig:
 
 def _section(content: Mapping[str, Any], key: str, keys: tuple[str, ...]) -> Mapping[str, Any]:
     value = content.get(key)
-    if value is None:
-        return {}
-    if not isinstance(value, Mapping):
-        raise EnvConfigError(f'{key} must be a mapping with the keys {", ".join(keys)}, got '
-                             f'{value!r}')
-    unknown = sorted(str(k) for k in set(value) - set(keys))
-    if unknown:
-        raise EnvConfigError(f'unknown key(s) {", ".join(f"{key}.{k}" for k in unknown)}; '
-                             f'known: {", ".join(keys)}')
-    return value
+    return {} if value is None else check_section(key, value, keys)
 
 
 def _choice(key: str, value: Any, choices: tuple[str, ...]) -> str:
@@ -194,13 +185,7 @@ def merged(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, A
 
 def env_config_from_mapping(content: Any, base_dir: Path | None = None) -> EnvConfig:
     """Validate a whole configuration mapping; raise EnvConfigError naming the key."""
-    if not isinstance(content, Mapping):
-        raise EnvConfigError(f'an environment configuration must be a mapping with the keys '
-                             f'{", ".join(ENV_KEYS)}')
-    unknown = sorted(str(k) for k in set(content) - set(ENV_KEYS))
-    if unknown:
-        raise EnvConfigError(f'unknown key(s) {", ".join(map(repr, unknown))}; known: '
-                             f'{", ".join(ENV_KEYS)}')
+    _check_top(content, 'the configuration')
     try:
         return _build(content, base_dir)
     except EnvConfigError:
@@ -308,8 +293,6 @@ def load_env_config(source: str | Path | Mapping[str, Any] | None = None,
             loaded = read_yaml(path)
         except ConeFeederError as exc:
             raise EnvConfigError(str(exc)) from exc
-        if not isinstance(loaded, Mapping):
-            raise EnvConfigError(f'{path} must hold a mapping with the keys of {default_path}')
         _check_top(loaded, str(path))
         content, base_dir = merged(content, loaded), path.parent
     elif isinstance(source, Mapping):
@@ -323,7 +306,10 @@ def load_env_config(source: str | Path | Mapping[str, Any] | None = None,
     return env_config_from_mapping(content, base_dir)
 
 
-def _check_top(content: Mapping[str, Any], where: str) -> None:
+def _check_top(content: Any, where: str) -> None:
+    if not isinstance(content, Mapping):
+        raise EnvConfigError(f'{where} must be a mapping with the keys {", ".join(ENV_KEYS)}, '
+                             f'got {content!r}')
     unknown = sorted(str(k) for k in set(content) - set(ENV_KEYS))
     if unknown:
         raise EnvConfigError(f'unknown key(s) {", ".join(map(repr, unknown))} in {where}; '

@@ -74,7 +74,7 @@ def test_on_surface_places_the_piece_at_its_resting_gap() -> None:
      "particles[0]: parameter 'm' = 0 is out of range"),
     ({'particles': [{'velocity': [0.0, 0.0, 0.0]}]}, 'particles[0] has no position'),
     ({'solver': {'rtol': 2.0}}, "parameter 'rtol' = 2 is out of range"),
-    ({'feed': {'rate': 2.0, 'speed': 1}}, 'unknown key(s) feed.speed'),
+    ({'feed': {'rate': 2.0, 'speed': 1}}, "unknown feed key(s) 'speed'"),
     ({'feed': {'rate': -2.0}}, 'feed.rate'),
     ({'feed': {'rate': 2.0, 'rho_max': 0.3}}, 'feed.rho_max = 0.3 m must be inside the cone'),
     ({'feed': {'rate': 2.0, 'seed': -1}}, 'feed.seed'),

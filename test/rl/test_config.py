@@ -48,10 +48,10 @@ def test_a_file_with_some_keys(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize('overrides, fragment', [
     ({'episode_tme': 1.0}, "unknown key(s) 'episode_tme'"),
-    ({'feed': {'speed': 1.0}}, 'unknown key(s) feed.speed'),
-    ({'reward': {'pack': 1.0}}, 'unknown key(s) reward.pack'),
-    ({'grid': {'rings': 3}}, 'unknown key(s) grid.rings'),
-    ({'drive': {'cmd_timeout': 1.0}}, 'unknown key(s) drive.cmd_timeout'),
+    ({'feed': {'speed': 1.0}}, "unknown feed key(s) 'speed'"),
+    ({'reward': {'pack': 1.0}}, "unknown reward key(s) 'pack'"),
+    ({'grid': {'rings': 3}}, "unknown grid key(s) 'rings'"),
+    ({'drive': {'cmd_timeout': 1.0}}, "unknown drive key(s) 'cmd_timeout'"),
     ({'channel_targets': []}, 'channel_targets must not be empty'),
     ({'channel_targets': [0.1, 0.2]}, 'channel_targets needs 14 numbers'),
     ({'channel_targets': 0.0}, 'channel_targets are all 0'),

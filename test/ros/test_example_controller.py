@@ -14,8 +14,6 @@
 
 """Tests of the example controller: its decision rule, cloud parsing, and a closed loop."""
 
-from collections.abc import Iterator
-import random
 import time
 
 from cone_feeder_sim.errors import ParameterError
@@ -26,7 +24,6 @@ from cone_feeder_sim.ros.example_controller import (
 from cone_feeder_sim.ros.sim_node import SimNode
 import numpy as np
 import pytest
-import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -82,16 +79,6 @@ def test_the_learner_learns_where_each_direction_sends_product() -> None:
     assert learner.direction == CCW  # it feeds the empty heads
     learner.add_exits(np.array([3, 4]), np.array([0.1, 0.1]))
     assert learner.decide(np.array([0.0, 0.0, 0.5, 0.5])) == CW
-
-
-@pytest.fixture
-def context() -> Iterator[Context]:
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
-    try:
-        yield ctx
-    finally:
-        ctx.try_shutdown()
 
 
 def test_an_unknown_objective_is_refused(context: Context) -> None:

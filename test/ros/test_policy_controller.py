@@ -14,9 +14,7 @@
 
 """Tests of policy_controller: the observation from the topics, and a policy driving sim_node."""
 
-from collections.abc import Iterator
 from pathlib import Path
-import random
 import time
 
 from cone_feeder_sim.errors import ConeFeederError
@@ -29,7 +27,6 @@ from cone_feeder_sim.ros.policy_controller import observe, PolicyController
 from cone_feeder_sim.ros.sim_node import SimNode
 import numpy as np
 import pytest
-import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -57,16 +54,6 @@ def test_the_topics_give_the_environments_observation(variant: dict) -> None:
             np.testing.assert_allclose(mine[key], obs[key], rtol=1e-6, atol=1e-6)
     else:
         np.testing.assert_allclose(mine, obs, rtol=1e-6, atol=1e-6)
-
-
-@pytest.fixture
-def context() -> Iterator[Context]:
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
-    try:
-        yield ctx
-    finally:
-        ctx.try_shutdown()
 
 
 @pytest.fixture(scope='module')
