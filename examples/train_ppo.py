@@ -29,7 +29,8 @@ Printed and written to ``OUT/comparison.csv``: the episode reward, the channel d
 error (the root mean square of the channels' deficits against their targets at the end,
 relative to the mean target mass), packs per minute and the mean giveaway (g). Also written:
 ``OUT/policy.zip`` (the policy, for ``policy_controller``), ``OUT/env_config.yaml`` (the
-environment it was trained on), ``OUT/learning_curve.csv`` and ``.png``. Example::
+environment it was trained on), ``OUT/learning_curve.csv`` and ``.png`` (with the
+baselines' mean reward on episodes of the training length). Example::
 
     .venv/bin/python examples/train_ppo.py --timesteps 200000 --out results/ppo
 """
@@ -138,6 +139,33 @@ def evaluate(make_policy, seeds: list[int], eval_time: float) -> dict[str, float
                     np.mean(rows, axis=0)))
 
 
+def plot(out: Path, eval_seeds: int) -> None:
+    """Draw OUT/learning_curve.png from OUT/learning_curve.csv, with the baselines' lines.
+
+    The baselines run the same seeded episodes of the training length, so that their
+    mean episode rewards compare with the curve's.
+    """
+    with (out / 'learning_curve.csv').open() as stream:
+        points = [(int(r['timesteps']), float(r['mean_episode_reward']))
+                  for r in csv.DictReader(stream)]
+    if not points:
+        return
+    seeds = list(range(1000, 1000 + eval_seeds))
+    steps, rewards = zip(*points)
+    fig, ax = plt.subplots(figsize=(6, 3.5), dpi=100)
+    ax.plot(steps, rewards, marker='.', label='PPO (training episodes)')
+    for (name, make), style in zip((('open loop', pattern_policy), ('rule', rule_policy)),
+                                   ('--', ':')):
+        reward = evaluate(make, seeds, ENV_CONFIG['episode_time'])['reward']
+        ax.axhline(reward, linestyle=style, color='grey', label=f'{name} ({eval_seeds} seeds)')
+    ax.set_xlabel('environment steps')
+    ax.set_ylabel(f'mean episode reward ({ENV_CONFIG["episode_time"]:g}-s episodes)')
+    ax.set_title('PPO on ConeFeederVectorEnv (contact off, weigher on)')
+    ax.legend(fontsize=8, loc='lower right')
+    fig.tight_layout()
+    fig.savefig(out / 'learning_curve.png')
+
+
 def main() -> None:
     """Train, evaluate, write the files."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -147,7 +175,12 @@ def main() -> None:
     parser.add_argument('--eval-seeds', type=int, default=20)
     parser.add_argument('--eval-time', type=float, default=60.0, help='s per evaluation')
     parser.add_argument('--out', type=Path, default=Path('results/ppo'))
+    parser.add_argument('--plot-only', action='store_true',
+                        help='only redraw OUT/learning_curve.png from OUT/learning_curve.csv')
     args = parser.parse_args()
+    if args.plot_only:
+        plot(args.out, args.eval_seeds)
+        return
     args.out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)  # the feeders take the cores
     venv = VecMonitor(SB3VecEnv(ConeFeederVectorEnv(args.envs, ENV_CONFIG)))
@@ -179,19 +212,7 @@ def main() -> None:
     print('|---' * (len(columns) + 1) + '|')
     for name, figures in results.items():
         print(f'| {name} | ' + ' | '.join(f'{figures[c]:.3g}' for c in columns) + ' |')
-    if curve.points:
-        steps, rewards, _ = zip(*curve.points)
-        fig, ax = plt.subplots(figsize=(6, 3.5), dpi=100)
-        ax.plot(steps, rewards, marker='.')
-        for name in ('open loop', 'rule'):
-            scaled = results[name]['reward'] * ENV_CONFIG['episode_time'] / args.eval_time
-            ax.axhline(scaled, linestyle='--', color='grey')
-            ax.annotate(name, (steps[0], scaled), fontsize=8)
-        ax.set_xlabel('environment steps')
-        ax.set_ylabel(f'mean episode reward ({ENV_CONFIG["episode_time"]:g} s episodes)')
-        ax.set_title('PPO on ConeFeederVectorEnv')
-        fig.tight_layout()
-        fig.savefig(args.out / 'learning_curve.png')
+    plot(args.out, args.eval_seeds)
     venv.close()
 
 
