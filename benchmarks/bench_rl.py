@@ -88,7 +88,7 @@ def main() -> None:
             rounds = ROUNDS[contact]
             rows = [('ConeFeederEnv', 1, ConeFeederEnv(**settings(contact)))]
             rows.append(('SyncVectorEnv', args.sync_k, gymnasium.vector.SyncVectorEnv(
-                [lambda: ConeFeederEnv(**settings(contact))] * args.sync_k)))
+                [lambda c=contact: ConeFeederEnv(**settings(c))] * args.sync_k)))
             rows += [('ConeFeederVectorEnv', k, ConeFeederVectorEnv(k, **settings(contact)))
                      for k in args.ks]
             for name, k, env in rows:

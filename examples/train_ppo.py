@@ -140,7 +140,8 @@ def evaluate(make_policy, seeds: list[int], eval_time: float) -> dict[str, float
 
 
 def plot(out: Path, eval_seeds: int) -> None:
-    """Draw OUT/learning_curve.png from OUT/learning_curve.csv, with the baselines' lines.
+    """
+    Draw OUT/learning_curve.png from OUT/learning_curve.csv, with the baselines' lines.
 
     The baselines run the same seeded episodes of the training length, so that their
     mean episode rewards compare with the curve's.

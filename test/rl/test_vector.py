@@ -14,8 +14,11 @@
 
 """Tests of rl.vector and rl.sb3: K feeders step for step as K single ones, autoreset."""
 
+from pathlib import Path
+
 from cone_feeder_sim.rl import ConeFeederEnv, ConeFeederVectorEnv, ENV_ID
-from cone_feeder_sim.rl.sb3 import SB3VecEnv
+from cone_feeder_sim.rl.config import load_env_config
+from cone_feeder_sim.rl.sb3 import load_policy, SB3VecEnv
 import gymnasium
 from gymnasium.vector import AutoresetMode
 import numpy as np
@@ -121,3 +124,15 @@ def test_sb3_adapter_resets_in_the_step_with_the_terminal_observation() -> None:
     assert venv.get_attr('config')[0].episode_time == 0.3
     venv.close()
     reference.close()
+
+
+def test_the_shipped_policy_loads_and_acts_in_its_environment() -> None:
+    directory = Path(__file__).resolve().parents[2] / 'examples' / 'ppo_policy'
+    model = load_policy(str(directory / 'policy.zip'))
+    env = ConeFeederEnv(load_env_config(directory / 'env_config.yaml'))
+    assert model.observation_space == env.observation_space
+    obs, _ = env.reset(seed=0)
+    for _ in range(3):
+        action, _ = model.predict(obs, deterministic=True)
+        assert env.action_space.contains(action)
+        obs = env.step(action)[0]
