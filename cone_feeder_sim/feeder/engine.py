@@ -63,8 +63,8 @@ from ..physics.params import (
     check_integer, check_number, Limit, ModelParams, P_M, ProductParams, SolverParams)
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
-    add_particles, advance, as_points, check_positions, ExitEvents, Failure, SimParams, SimState,
-    StepStats, warm_up, world_from_cone)
+    add_particles, advance, advance_many, as_points, check_positions, ExitEvents, Failure,
+    SimParams, SimState, StepResult, StepStats, warm_up, world_from_cone)
 from ..weigher.combination import warm_up as warm_up_weigher
 from ..weigher.machine import check_machine, Pack, Weigher, WeigherParams, WeigherStats
 
@@ -83,6 +83,7 @@ __all__ = [
     'SpawnRequest',
     'TickResult',
     'pattern_from_flat',
+    'tick_many',
 ]
 
 #: Allowed ranges of the engine's own settings (the model's are in cone_feeder_sim.physics.params).
@@ -639,6 +640,12 @@ class FeederEngine:
 
     def tick(self) -> TickResult:
         """Apply the queued inputs, drop the feed, advance by dt and return the result."""
+        plan = self._begin_tick()
+        return self._end_tick(plan, advance(self._state, self._sim_params, plan.profile,
+                                            plan.t1))
+
+    def _begin_tick(self) -> '_TickPlan':
+        """Apply the queued inputs and the feed at the tick's start; return the tick's plan."""
         dt = self._config.dt
         index = self._index
         t0 = index * dt
@@ -659,10 +666,14 @@ class FeederEngine:
                                 self._drive.max_angular_acceleration)
         # the state's time is t0 already (ticks are contiguous); make it exact
         self._state = replace(self._state, t=t0)
-        step = advance(self._state, self._sim_params, profile, t1)
+        return _TickPlan(index, t0, t1, applied, np.concatenate(spawned), feed_ids, was_reset,
+                         target, mode, profile)
+
+    def _end_tick(self, plan: '_TickPlan', step: StepResult) -> TickResult:
+        """Take the advanced state, account for exits and the weigher; return the result."""
         self._state = step.state
-        self._omega = profile.omega(t1)
-        self._index = index + 1
+        self._omega = plan.profile.omega(plan.t1)
+        self._index = plan.index + 1
         exits = step.exits
         if len(exits):
             np.add.at(self._channel_mass, exits.channel - 1, exits.mass)
@@ -671,16 +682,54 @@ class FeederEngine:
         hoppers = weigher_stats = None
         if self._weigher is not None:
             self._weigher.receive(exits.channel, exits.mass, exits.t)
-            packs = tuple(self._weigher.advance(t1))
+            packs = tuple(self._weigher.advance(plan.t1))
             hoppers = self._weigher.hopper_readings()
             weigher_stats = self._weigher.stats()
         q, qdot, _ = world_from_cone(self._state.y, self._state.angle, self._omega)
         return TickResult(
-            index=index, t0=t0, t=t1, angle=self._state.angle, omega=self._omega,
-            target_omega=target, mode=mode, ids=self._state.ids.copy(), positions=q,
-            velocities=qdot, masses=self._state.products[:, P_M].copy(), exits=exits,
-            failures=step.failures, stats=step.stats, channel_mass=self._channel_mass.copy(),
-            applied=applied, spawned_ids=np.concatenate(spawned), feed_ids=feed_ids,
-            reset=was_reset, refusals=tuple(self._refusals), mass_in=self._mass_in,
+            index=plan.index, t0=plan.t0, t=plan.t1, angle=self._state.angle,
+            omega=self._omega, target_omega=plan.target, mode=plan.mode,
+            ids=self._state.ids.copy(), positions=q, velocities=qdot,
+            masses=self._state.products[:, P_M].copy(), exits=exits, failures=step.failures,
+            stats=step.stats, channel_mass=self._channel_mass.copy(), applied=plan.applied,
+            spawned_ids=plan.spawned_ids, feed_ids=plan.feed_ids, reset=plan.reset,
+            refusals=tuple(self._refusals), mass_in=self._mass_in,
             failed_mass=self._failed_mass, packs=packs, hoppers=hoppers,
             weigher_stats=weigher_stats)
+
+
+@dataclass(frozen=True, eq=False)
+class _TickPlan:
+    """What a tick's start decided: its index and times (s), inputs, feed, drive profile."""
+
+    index: int
+    t0: float
+    t1: float
+    applied: tuple[EngineInput, ...]
+    spawned_ids: np.ndarray
+    feed_ids: np.ndarray
+    reset: bool
+    target: float
+    mode: str
+    profile: RotationProfile
+
+
+def tick_many(engines: Sequence[FeederEngine]) -> list[TickResult]:
+    """
+    Tick several engines of the same model and solver at once; return their results.
+
+    Without contact between pieces their pieces are integrated in one compiled call over the
+    cores (:func:`~cone_feeder_sim.physics.simulation.advance_many`); each result equals
+    what the engine's own :meth:`FeederEngine.tick` gives, bit for bit.
+    """
+    if not engines:
+        return []
+    params = engines[0]._sim_params
+    for engine in engines[1:]:
+        if (engine.config.model != engines[0].config.model
+                or engine.config.solver != engines[0].config.solver):
+            raise ParameterError('tick_many needs engines of the same model and solver')
+    plans = [engine._begin_tick() for engine in engines]
+    steps = advance_many([engine._state for engine in engines], params,
+                         [plan.profile for plan in plans], [plan.t1 for plan in plans])
+    return [engine._end_tick(plan, step) for engine, plan, step in zip(engines, plans, steps)]

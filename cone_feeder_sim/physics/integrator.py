@@ -299,3 +299,40 @@ def advance_batch(y, products, machine, seg_t, seg_omega, seg_domega, r_exit, h_
             status[p] = st
             t_event[p] = t_ev
             h_prop[p] = hp
+
+
+@numba.njit(cache=True, error_model='numpy', parallel=True, nogil=True)
+def advance_batch_owned(y, products, machine, owner, seg_t, seg_omega, seg_domega, seg_count,
+                        r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max, h_kink,
+                        max_steps, stats):
+    """
+    Advance the pieces of several feeders, each under its own rotation, in one call.
+
+    As :func:`advance_batch`, with owner (N,) int64 the feeder of each piece and the
+    segments of feeder f in row f: seg_t (F, S + 1), seg_omega and seg_domega (F, S),
+    seg_count (F,) how many of the S are used. A piece gets exactly the computation it gets
+    in :func:`advance_batch` with its feeder's segments, so the results are the same.
+    """
+    n = STATE_SIZE
+    count = y.shape[0]
+    groups = min(count, GROUPS)
+    for g in numba.prange(groups):
+        work = np.empty((2, n, n))
+        piv = np.empty((2, 3), dtype=np.int64)
+        k = np.empty((n, n))
+        y1 = np.empty(n)
+        f0 = np.empty(n)
+        load = np.zeros(3)
+        for p in range(g, count, groups):
+            if status[p] != ACTIVE:
+                continue
+            o = owner[p]
+            m = seg_count[o]
+            st, t_ev, hp = advance_particle(y[p], products[p], machine, seg_t[o, :m + 1],
+                                            seg_omega[o, :m], seg_domega[o, :m], r_exit,
+                                            h_prop[p], rtol, atol, h_min, h_max, h_kink,
+                                            max_steps, stats[p], work, piv, k, y1, f0, load,
+                                            load)
+            status[p] = st
+            t_event[p] = t_ev
+            h_prop[p] = hp

@@ -34,8 +34,9 @@ from .band import band_order
 from .coupling import (
     advance_coupled, COUPLING_STAT_WIDTH, CST_ACCEPTED, CST_FORCED, CST_REJECTED)
 from .integrator import (
-    ACTIVE, advance_batch, EXITED, FAILED, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW,
-    REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED, STAT_WIDTH)
+    ACTIVE, advance_batch, advance_batch_owned, EXITED, FAILED, REASON_NOT_FINITE,
+    REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED,
+    STAT_WIDTH)
 from .islands import advance_island, islands_of
 from .model import STATE_SIZE
 from .neighbours import contact_pairs
@@ -317,29 +318,94 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     carry on. The inputs are not modified.
     """
     seg_t, seg_omega, seg_domega = profile.segments(state.t, t1)
-    y = state.y.copy()
-    step_size = state.step_size.copy()
-    n = state.count
-    status = np.full(n, ACTIVE, dtype=np.int64)
-    t_event = np.zeros(n)
-    stats = np.zeros((n, STAT_WIDTH), dtype=np.int64)
+    work = _Work(state)
     solver = params.solver
     interactions = params.model.interactions
-    largest_island = left_out = 0
-    coupling_step = state.coupling_step
-    counters = np.zeros(COUPLING_STAT_WIDTH, dtype=np.int64)
+    n = state.count
     if interactions.enabled and n > 1 and interactions.coupling == 'multirate':
-        largest_island, coupling_step = _advance_multirate(state, params, profile, t1, y,
-                                                           step_size, status, t_event, stats,
-                                                           counters)
+        work.largest_island, work.coupling_step = _advance_multirate(
+            state, params, profile, t1, work.y, work.step_size, work.status, work.t_event,
+            work.stats, work.counters)
     elif interactions.enabled and n > 1:
-        largest_island, left_out = _advance_with_contacts(state, params, profile, t1, y,
-                                                          step_size, status, t_event, stats)
+        work.largest_island, work.left_out = _advance_with_contacts(
+            state, params, profile, t1, work.y, work.step_size, work.status, work.t_event,
+            work.stats)
     elif n:
-        advance_batch(y, state.products, params.global_row, seg_t, seg_omega, seg_domega,
-                      params.model.r, step_size, status, t_event, solver.rtol, params.atol,
-                      solver.h_min, solver.h_max, solver.h_init, solver.max_steps,
-                      stats)
+        advance_batch(work.y, state.products, params.global_row, seg_t, seg_omega, seg_domega,
+                      params.model.r, work.step_size, work.status, work.t_event, solver.rtol,
+                      params.atol, solver.h_min, solver.h_max, solver.h_init,
+                      solver.max_steps, work.stats)
+    return _result(state, params, profile, t1, work)
+
+
+def advance_many(states: Sequence[SimState], params: SimParams,
+                 profiles: Sequence[RotationProfile], t1: Sequence[float]) -> list[StepResult]:
+    """
+    Advance several independent feeders (same parameters, each its own rotation) at once.
+
+    Without contact between pieces, the pieces of every feeder go to one compiled call
+    (:func:`~cone_feeder_sim.physics.integrator.advance_batch_owned`) that spreads them over
+    the cores; with contact each feeder is advanced by :func:`advance` in turn. Each result
+    is what :func:`advance` gives for that feeder alone, bit for bit.
+    """
+    if not len(states) == len(profiles) == len(t1):
+        raise ValueError(f'{len(states)} states, {len(profiles)} profiles and {len(t1)} ends')
+    if params.model.interactions.enabled:
+        return [advance(s, params, p, t) for s, p, t in zip(states, profiles, t1)]
+    segments = [p.segments(s.t, t) for s, p, t in zip(states, profiles, t1)]
+    width = max(len(omega) for _, omega, _ in segments)
+    seg_t = np.zeros((len(states), width + 1))
+    seg_omega = np.zeros((len(states), width))
+    seg_domega = np.zeros((len(states), width))
+    seg_count = np.zeros(len(states), dtype=np.int64)
+    for f, (times, omega, domega) in enumerate(segments):
+        seg_count[f] = len(omega)
+        seg_t[f, :len(times)] = times
+        seg_omega[f, :len(omega)] = omega
+        seg_domega[f, :len(domega)] = domega
+    works = [_Work(s) for s in states]
+    counts = [s.count for s in states]
+    if sum(counts):
+        solver = params.solver
+        owner = np.repeat(np.arange(len(states), dtype=np.int64), counts)
+        y = np.concatenate([w.y for w in works])
+        step_size = np.concatenate([w.step_size for w in works])
+        status = np.concatenate([w.status for w in works])
+        t_event = np.concatenate([w.t_event for w in works])
+        stats = np.concatenate([w.stats for w in works])
+        products = np.concatenate([s.products for s in states])
+        advance_batch_owned(y, products, params.global_row, owner, seg_t, seg_omega,
+                            seg_domega, seg_count, params.model.r, step_size, status, t_event,
+                            solver.rtol, params.atol, solver.h_min, solver.h_max,
+                            solver.h_init, solver.max_steps, stats)
+        bounds = np.cumsum([0] + counts)
+        for w, a, b in zip(works, bounds[:-1], bounds[1:]):
+            w.y, w.step_size, w.status = y[a:b], step_size[a:b], status[a:b]
+            w.t_event, w.stats = t_event[a:b], stats[a:b]
+    return [_result(s, params, p, t, w) for s, p, t, w in zip(states, profiles, t1, works)]
+
+
+class _Work:
+    """The arrays one advance updates in place: copies of a state's, and the counters."""
+
+    def __init__(self, state: SimState) -> None:
+        n = state.count
+        self.y = state.y.copy()
+        self.step_size = state.step_size.copy()
+        self.status = np.full(n, ACTIVE, dtype=np.int64)
+        self.t_event = np.zeros(n)
+        self.stats = np.zeros((n, STAT_WIDTH), dtype=np.int64)
+        self.counters = np.zeros(COUPLING_STAT_WIDTH, dtype=np.int64)
+        self.largest_island = 0
+        self.left_out = 0
+        self.coupling_step = state.coupling_step
+
+
+def _result(state: SimState, params: SimParams, profile: RotationProfile, t1: float,
+            work: _Work) -> StepResult:
+    """Return the step's result: exits and failures located, the pieces that left removed."""
+    y, status, t_event, stats, counters = (work.y, work.status, work.t_event, work.stats,
+                                           work.counters)
     exits = _exit_events(state, params, profile, y, status, t_event)
     failures = tuple(_failure(state, profile, y, i, float(t_event[i]),
                               FAILURE_REASONS.get(int(stats[i, STAT_REASON]), 'unknown'))
@@ -347,10 +413,10 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     keep = status == ACTIVE
     new_state = replace(state, t=float(t1), angle=state.angle + profile.integral(state.t, t1),
                         y=y[keep], products=state.products[keep], ids=state.ids[keep],
-                        step_size=step_size[keep], coupling_step=coupling_step)
+                        step_size=work.step_size[keep], coupling_step=work.coupling_step)
     step_stats = StepStats(accepted=int(stats[:, STAT_ACCEPTED].sum()),
-                           rejected=int(stats[:, STAT_REJECTED].sum()), particles=n,
-                           largest_island=largest_island, pairs_left_out=left_out,
+                           rejected=int(stats[:, STAT_REJECTED].sum()), particles=state.count,
+                           largest_island=work.largest_island, pairs_left_out=work.left_out,
                            coupling_intervals=int(counters[CST_ACCEPTED]),
                            coupling_rejected=int(counters[CST_REJECTED]),
                            coupling_forced=int(counters[CST_FORCED]))
@@ -661,6 +727,7 @@ def warm_up() -> None:
     start = (x, 0.0, resting_height(model, model.product, x, 0.0))
     state, _ = add_particles(SimState(), params, [start], None, None, omega=0.0)
     advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
+    advance_many([state], params, [RotationProfile.constant(1.0)], [1.0e-3])  # batched
     # the contact kernels (neighbour search, multirate coupling, islands) with two touching
     # pieces
     other = (x + 0.04, 0.0, resting_height(model, model.product, x + 0.04, 0.0))

@@ -75,7 +75,7 @@ from .config import EnvConfig, load_env_config
 from .spaces import (
     action_space, decode_action, features, mass_grid, observation, observation_space)
 from ..errors import EnvConfigError
-from ..feeder.engine import ChannelFeed, FeederEngine
+from ..feeder.engine import ChannelFeed, FeederEngine, TickResult
 from ..physics.params import P_M
 
 __all__ = ['ConeFeederEnv']
@@ -169,18 +169,24 @@ class ConeFeederEnv(gymnasium.Env):
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """Hold the action's target for a control period; return (obs, r, False, trunc, info)."""
+        self.act(action)
+        return self.outcome([self.engine.tick() for _ in range(self.config.ticks)])
+
+    def act(self, action: Any) -> None:
+        """Queue the action's inputs for the next tick (the first half of :meth:`step`)."""
         engine = self.engine
         omega, amplitudes = decode_action(self.config, self.action_space, action)
         engine.command(omega)
         if amplitudes is not None:
             engine.submit(ChannelFeed(amplitudes))
-        packs, giveaway, exits, failures = 0, 0.0, 0, 0
-        for _ in range(self.config.ticks):
-            result = engine.tick()
-            packs += len(result.packs)
-            giveaway += sum(pack.giveaway for pack in result.packs)
-            exits += len(result.exits)
-            failures += len(result.failures)
+
+    def outcome(self, results: list[TickResult]) -> tuple[Any, float, bool, bool,
+                                                          dict[str, Any]]:
+        """Return the step's (obs, r, False, trunc, info) from its ticks' results."""
+        packs = sum(len(result.packs) for result in results)
+        giveaway = sum(pack.giveaway for result in results for pack in result.packs)
+        exits = sum(len(result.exits) for result in results)
+        failures = sum(len(result.failures) for result in results)
         self._steps += 1
         terms = self._reward_terms(packs, giveaway)
         truncated = self._steps >= self.config.episode_steps

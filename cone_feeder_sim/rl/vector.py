@@ -15,12 +15,15 @@
 """
 :class:`ConeFeederVectorEnv`: K feeders stepped together on the machine's cores.
 
-Each sub-environment is a :class:`~cone_feeder_sim.rl.env.ConeFeederEnv`. A step hands the K
-environments to a pool of threads (one per core); every kernel a tick runs is compiled with
-``nogil=True``, so the feeders advance in parallel, each on one numba thread (the pieces of
-one feeder are not split further). Results are the same for any number of threads: each
-feeder's state depends on nothing but its own inputs, so the vector environment equals K
-single environments step for step (a test checks it against ``SyncVectorEnv``).
+Each sub-environment is a :class:`~cone_feeder_sim.rl.env.ConeFeederEnv`. Without contact
+between pieces, every tick of a step advances the pieces of all K feeders in one compiled
+call (:func:`~cone_feeder_sim.feeder.engine.tick_many`), spread over the cores. With contact
+on, the K environments go to a pool of threads (one per core), each feeder on one numba
+thread: every kernel a tick runs releases the GIL, and the contact kernels run an island on
+one thread, so feeders side by side use the cores better than one feeder's islands. Results
+are the same either way and for any number of threads: each feeder's state depends on
+nothing but its own inputs, so the vector environment equals K single environments step for
+step (a test checks it against ``SyncVectorEnv``).
 
 Autoreset is ``NEXT_STEP`` (Gymnasium's default): the step after an episode ended resets
 that sub-environment and returns its first observation, with reward 0 and
@@ -43,6 +46,7 @@ import numpy as np
 from .config import EnvConfig, load_env_config
 from .env import ConeFeederEnv
 from ..errors import EnvConfigError
+from ..feeder.engine import tick_many, TickResult
 
 __all__ = ['ConeFeederVectorEnv']
 
@@ -61,7 +65,8 @@ class ConeFeederVectorEnv(gymnasium.vector.VectorEnv):
     num_envs: K, the number of feeders (>= 1).
     config: as for :class:`~cone_feeder_sim.rl.env.ConeFeederEnv` (None: config/rl.yaml;
     a file; a mapping; an EnvConfig), the same for every feeder.
-    threads: threads that step the feeders (0: one per core, at most K).
+    threads: threads that step the feeders with contact on (0: one per core, at most K);
+    without contact, the one compiled call runs on numba's threads.
     render_mode: None (no rendering yet).
     **overrides: keys of ``config/rl.yaml`` merged over ``config``.
     """
@@ -148,14 +153,10 @@ class ConeFeederVectorEnv(gymnasium.vector.VectorEnv):
         if len(actions) != self.num_envs:
             raise ValueError(f'{len(actions)} actions given for {self.num_envs} environments')
 
-        def one(index: int, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-            env = self.envs[index]
-            if self._autoreset[index]:
-                obs, info = env.reset()
-                return obs, 0.0, False, False, info
-            return env.step(action)
-
-        results = self._map(one, list(enumerate(actions)))
+        if self.config.engine.model.interactions.enabled:
+            results = self._map(self._step_one, list(enumerate(actions)))
+        else:
+            results = self._step_batched(actions)
         infos: dict[str, Any] = {}
         for i, (_, reward, terminated, truncated, info) in enumerate(results):
             self._rewards[i] = reward
@@ -167,6 +168,35 @@ class ConeFeederVectorEnv(gymnasium.vector.VectorEnv):
                                          [r[0] for r in results], self._observations)
         return (self._copy(), self._rewards.copy(), self._terminations.copy(),
                 self._truncations.copy(), infos)
+
+    def _step_one(self, index: int, action: Any) -> tuple[Any, float, bool, bool,
+                                                          dict[str, Any]]:
+        """Step (or autoreset) one feeder."""
+        env = self.envs[index]
+        if self._autoreset[index]:
+            obs, info = env.reset()
+            return obs, 0.0, False, False, info
+        return env.step(action)
+
+    def _step_batched(self, actions: list[Any]) -> list[tuple[Any, float, bool, bool,
+                                                             dict[str, Any]]]:
+        """Step the feeders with one compiled call per tick for all of them."""
+        results: list[Any] = [None] * self.num_envs
+        stepping = []
+        for i, env in enumerate(self.envs):
+            if self._autoreset[i]:
+                obs, info = env.reset()
+                results[i] = (obs, 0.0, False, False, info)
+            else:
+                env.act(actions[i])
+                stepping.append(i)
+        ticks: list[list[TickResult]] = [[] for _ in stepping]
+        for _ in range(self.config.ticks):
+            for done, result in zip(ticks, tick_many([self.envs[i].engine for i in stepping])):
+                done.append(result)
+        for i, done in zip(stepping, ticks):
+            results[i] = self.envs[i].outcome(done)
+        return results
 
     def _copy(self) -> Any:
         if isinstance(self._observations, dict):

@@ -19,8 +19,9 @@ import math
 from cone_feeder_sim.errors import InputError, ParameterError, ScenarioError
 from cone_feeder_sim.feeder.engine import (
     drive_profile, DriveParams, EngineConfig, FeederEngine, FeedParams, MAX_PENDING_INPUTS,
-    pattern_from_flat, PieceSpec, Reconfigure, ResetRequest, RotationCommand, SpawnRequest)
-from cone_feeder_sim.physics.integrator import advance_batch
+    pattern_from_flat, PieceSpec, Reconfigure, ResetRequest, RotationCommand, SpawnRequest,
+    tick_many)
+from cone_feeder_sim.physics.integrator import advance_batch, advance_batch_owned
 from cone_feeder_sim.physics.params import (
     ChannelLayout, InteractionParams, ModelParams, SolverParams)
 from cone_feeder_sim.physics.simulation import resting_height
@@ -575,3 +576,31 @@ def test_a_crowded_contact_tick_leaves_the_gil_to_other_threads() -> None:
     ticks = time.monotonic() - start
     assert sim.tick_index == 5
     assert longest < 0.25 * ticks, (longest, ticks)
+
+
+def test_tick_many_equals_each_engines_own_ticks() -> None:
+    # three feeders under their own drives and feeds, pieces integrated in one call
+    def engines() -> list[FeederEngine]:
+        made = []
+        for k, omega in enumerate((-6.0, 0.0, 8.0)):
+            eng = FeederEngine(EngineConfig(feed=FeedParams(rate=60.0, mass_rel_std=0.2,
+                                                            rho_min=0.17, rho_max=0.21),
+                                            seed=k, drive=DriveParams(cmd_timeout=0.0)))
+            eng.command(omega)
+            made.append(eng)
+        made[2].spawn(np.array([[0.1, 0.0, 0.05]]), velocities=np.zeros((1, 3)))
+        return made
+
+    together, alone = engines(), engines()
+    loaded = list(advance_batch_owned.signatures)  # warm_up loaded it: none compiles in a tick
+    assert loaded
+    exits = 0
+    for _ in range(30):
+        for mine, theirs in zip(tick_many(together), [eng.tick() for eng in alone]):
+            np.testing.assert_array_equal(mine.positions, theirs.positions)
+            np.testing.assert_array_equal(mine.velocities, theirs.velocities)
+            np.testing.assert_array_equal(mine.channel_mass, theirs.channel_mass)
+            assert mine.omega == theirs.omega and mine.stats == theirs.stats
+            exits += len(mine.exits)
+    assert exits > 0 and all(eng.piece_count > 5 for eng in together)
+    assert list(advance_batch_owned.signatures) == loaded

@@ -45,15 +45,17 @@ def assert_same(a, b) -> None:
         np.testing.assert_array_equal(a, b)
 
 
-@pytest.mark.parametrize('threads', [1, 2])
-def test_native_equals_sync_step_for_step_autoreset_included(threads: int) -> None:
+@pytest.mark.parametrize('threads, contact', [(1, False), (2, False), (2, True)])
+def test_native_equals_sync_step_for_step_autoreset_included(threads: int,
+                                                            contact: bool) -> None:
+    # contact off: one compiled call a tick for every feeder; on: a thread per feeder
     k = 3
-    native = ConeFeederVectorEnv(k, threads=threads, observation='dict',
-                                 max_pieces_observed=8, **KWARGS)
+    kwargs = {**KWARGS, 'observation': 'dict', 'max_pieces_observed': 8,
+              'interactions': {'enabled': contact}}
+    native = ConeFeederVectorEnv(k, threads=threads, **kwargs)
     assert native.metadata['autoreset_mode'] == AutoresetMode.NEXT_STEP
-    sync = gymnasium.vector.SyncVectorEnv(
-        [lambda: ConeFeederEnv(observation='dict', max_pieces_observed=8, **KWARGS)] * k,
-        autoreset_mode=AutoresetMode.NEXT_STEP)
+    sync = gymnasium.vector.SyncVectorEnv([lambda: ConeFeederEnv(**kwargs)] * k,
+                                          autoreset_mode=AutoresetMode.NEXT_STEP)
     assert native.observation_space == sync.observation_space
     assert native.action_space == sync.action_space
     assert_same(native.reset(seed=11), sync.reset(seed=11))
