@@ -178,8 +178,8 @@ class ConeFeederVectorEnv(gymnasium.vector.VectorEnv):
             return obs, 0.0, False, False, info
         return env.step(action)
 
-    def _step_batched(self, actions: list[Any]) -> list[tuple[Any, float, bool, bool,
-                                                             dict[str, Any]]]:
+    def _step_batched(
+            self, actions: list[Any]) -> list[tuple[Any, float, bool, bool, dict[str, Any]]]:
         """Step the feeders with one compiled call per tick for all of them."""
         results: list[Any] = [None] * self.num_envs
         stepping = []

@@ -46,8 +46,8 @@ def assert_same(a, b) -> None:
 
 
 @pytest.mark.parametrize('threads, contact', [(1, False), (2, False), (2, True)])
-def test_native_equals_sync_step_for_step_autoreset_included(threads: int,
-                                                            contact: bool) -> None:
+def test_native_equals_sync_step_for_step_autoreset_included(
+        threads: int, contact: bool) -> None:
     # contact off: one compiled call a tick for every feeder; on: a thread per feeder
     k = 3
     kwargs = {**KWARGS, 'observation': 'dict', 'max_pieces_observed': 8,
