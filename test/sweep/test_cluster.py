@@ -21,7 +21,9 @@ A scheduler and two workers started with the ``dask`` command, and the local clu
 """
 
 import dataclasses
+import io
 import json
+import logging
 import math
 import os
 from pathlib import Path
@@ -32,7 +34,7 @@ import sys
 import time
 
 from cone_feeder_sim.cli import main
-from cone_feeder_sim.sweep.cluster import dask_client
+from cone_feeder_sim.sweep.cluster import dask_client, HEARTBEAT_FAILURE, quiet_heartbeat
 from cone_feeder_sim.sweep.run import run_sweep
 from cone_feeder_sim.sweep.spec import load_sweep
 from distributed import Client
@@ -233,3 +235,22 @@ def test_the_local_cluster_has_one_single_threaded_worker_per_process() -> None:
         assert len(set(client.run(os.getpid).values())) == 2
         threads = client.run(lambda: __import__('numba').config.NUMBA_NUM_THREADS)
         assert set(threads.values()) == {1}
+
+
+def test_a_failed_heartbeat_is_one_line_without_traceback() -> None:
+    logger = logging.getLogger('distributed.worker.test-heartbeat')
+    stream = io.StringIO()
+    handler = logging.StreamHandler(stream)
+    logger.addHandler(handler)
+    logger.addFilter(quiet_heartbeat)
+    try:
+        try:
+            raise OSError('Stream is closed')
+        except OSError:
+            logger.exception(f'{HEARTBEAT_FAILURE}.')
+            logger.exception('Something else.')
+    finally:
+        logger.removeHandler(handler)
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == f'{HEARTBEAT_FAILURE}.' and lines[1] == 'Something else.'
+    assert lines[2] == 'Traceback (most recent call last):'  # other errors keep theirs
