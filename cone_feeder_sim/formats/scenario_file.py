@@ -40,7 +40,9 @@ Every problem is reported with its location (e.g. `particles[2].position`).
 """
 
 from collections.abc import Mapping
+import copy
 from dataclasses import replace
+import difflib
 import math
 from pathlib import Path
 from typing import Any
@@ -163,6 +165,51 @@ def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenari
     return Scenario(duration=duration, model=model, solver=solver, rotation=rotation,
                     particles=tuple(particles), output_interval=interval, weigher=weigher,
                     feed=feed, feed_seed=feed_seed)
+
+
+def set_scenario_key(root: Any, key: str, value: Any) -> Any:
+    """
+    Return a deep copy of the scenario mapping ``root`` with the dotted ``key`` set.
+
+    ``model.d``, ``rotation.1.1`` (lists by index), ``particles.2.position``; a key of a
+    section the mapping leaves out adds it. Raises ScenarioError naming the key.
+    """
+    parts = key.split('.')
+    if not all(parts):
+        raise ScenarioError(f'{key!r} is not a dotted key (empty part)')
+    if parts[0] not in SCENARIO_KEYS:
+        close = difflib.get_close_matches(parts[0], SCENARIO_KEYS, n=1)
+        hint = f' (did you mean {close[0]!r}?)' if close else ''
+        raise ScenarioError(f'{key}: {parts[0]!r} is not a scenario key{hint}; known: '
+                            f'{", ".join(SCENARIO_KEYS)}')
+    root = copy.deepcopy(root)
+    node = root
+    for depth, part in enumerate(parts):
+        last = depth == len(parts) - 1
+        parent = '.'.join(parts[:depth]) or 'the scenario'
+        if isinstance(node, list):
+            if not part.isdigit():
+                raise ScenarioError(f'{key}: {parent} is a list; {part!r} is not an index')
+            if int(part) >= len(node):
+                raise ScenarioError(f'{key}: {parent} has {len(node)} items (indices from 0)')
+            if last:
+                node[int(part)] = value
+            else:
+                node = node[int(part)]
+        elif isinstance(node, dict):
+            if not last:
+                known = [k for k in node if isinstance(k, str) and k.lower() == part.lower()]
+                if part not in node and known:
+                    raise ScenarioError(f'{key}: {parent} has no key {part!r} (did you '
+                                        f'mean {known[0]!r}?)')
+                if node.get(part) is None:
+                    node[part] = {}
+                node = node[part]
+            else:
+                node[part] = value
+        else:
+            raise ScenarioError(f'{key}: {parent} is a value ({node!r}), not a mapping or list')
+    return root
 
 
 def load_scenario(path: str | Path) -> Scenario:

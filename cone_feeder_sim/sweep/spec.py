@@ -46,9 +46,7 @@ it), so that a job runs the same on any worker.
 """
 
 from collections.abc import Mapping, Sequence
-import copy
 from dataclasses import dataclass
-import difflib
 import hashlib
 import itertools
 import math
@@ -58,10 +56,10 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..errors import ConeFeederError, SweepError
+from ..errors import ConeFeederError, ScenarioError, SweepError
 from ..formats.parameter_file import (
     config_dir, DEFAULT_PARAMETER_FILE, DEFAULT_WEIGHER_FILE, read_yaml)
-from ..formats.scenario_file import scenario_from_mapping, SCENARIO_KEYS
+from ..formats.scenario_file import scenario_from_mapping, set_scenario_key
 
 SWEEP_KEYS = ('scenario', 'grid', 'random', 'seeds')
 RANDOM_KEYS = ('samples', 'seed', 'keys')
@@ -121,42 +119,10 @@ def _plain(value: Any) -> Any:
 
 def set_dotted(root: Any, key: str, value: Any) -> Any:
     """Return a deep copy of the scenario mapping ``root`` with the dotted ``key`` set."""
-    parts = key.split('.')
-    if not all(parts):
-        raise SweepError(f'{key!r} is not a dotted key (empty part)')
-    if parts[0] not in SCENARIO_KEYS:
-        close = difflib.get_close_matches(parts[0], SCENARIO_KEYS, n=1)
-        hint = f' (did you mean {close[0]!r}?)' if close else ''
-        raise SweepError(f'{key}: {parts[0]!r} is not a scenario key{hint}; known: '
-                         f'{", ".join(SCENARIO_KEYS)}')
-    root = copy.deepcopy(root)
-    node = root
-    for depth, part in enumerate(parts):
-        last = depth == len(parts) - 1
-        parent = '.'.join(parts[:depth]) or 'the scenario'
-        if isinstance(node, list):
-            if not part.isdigit():
-                raise SweepError(f'{key}: {parent} is a list; {part!r} is not an index')
-            if int(part) >= len(node):
-                raise SweepError(f'{key}: {parent} has {len(node)} items (indices from 0)')
-            if last:
-                node[int(part)] = value
-            else:
-                node = node[int(part)]
-        elif isinstance(node, dict):
-            if not last:
-                known = [k for k in node if isinstance(k, str) and k.lower() == part.lower()]
-                if part not in node and known:
-                    raise SweepError(f'{key}: {parent} has no key {part!r} (did you mean '
-                                     f'{known[0]!r}?)')
-                if node.get(part) is None:
-                    node[part] = {}
-                node = node[part]
-            else:
-                node[part] = value
-        else:
-            raise SweepError(f'{key}: {parent} is a value ({node!r}), not a mapping or list')
-    return root
+    try:
+        return set_scenario_key(root, key, value)
+    except ScenarioError as exc:
+        raise SweepError(str(exc)) from None
 
 
 def _check_key(key: Any, where: str) -> str:
