@@ -34,7 +34,7 @@ setup(
     # (apt) or from the PyPI ros-jazzy-* wheels; they are deliberately not listed here.
     # Floors: requirements/runtime.txt says why each is the oldest version the code runs on.
     install_requires=['setuptools', 'numpy>=1.23.2', 'numba>=0.57', 'pyyaml>=6.0',
-                      'mcap>=1.6.0', 'rosbags>=0.10.8', 'matplotlib>=3.6'],
+                      'mcap>=1.6.0', 'rosbags>=0.10.8', 'matplotlib>=3.6', 'scipy>=1.9.2'],
     # `cone-feeder-sim sweep` runs on Dask (dask.distributed); only the sweep needs it.
     extras_require={'sweep': ['dask[distributed]>=2024.1'],
                     'rl': ['gymnasium>=1.0', 'stable-baselines3>=2.4']},

@@ -191,6 +191,12 @@ def build_parser() -> argparse.ArgumentParser:
                        help='worker processes of the local cluster (default: one per core)')
     sweep.add_argument('--retry-failed', action='store_true',
                        help='run the jobs that failed before again')
+    fit = sub.add_parser(
+        'fit', help="fit a scenario's free parameters to tracked pieces (bounded least "
+                    'squares, standard errors, correlations, identifiability warnings)')
+    fit.add_argument('fit', metavar='FIT.yaml', help='fit file: scenario, tracks, free keys')
+    fit.add_argument('--out', required=True, metavar='RESULT.yaml',
+                     help='where to write the estimates, errors and correlations')
     recover = sub.add_parser(
         'recover', help='copy the readable part of an unfinished or damaged MCAP file into a '
                         'complete one (with summary and footer)')
@@ -282,6 +288,30 @@ def cmd_compile(err: TextIO) -> int:
     return 0
 
 
+def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
+    """Fit a scenario to tracks; write RESULT.yaml; warn of what the data cannot identify."""
+    import yaml
+
+    from .fit.problem import FitProblem
+    from .fit.solve import fit
+    from .fit.spec import load_fit
+
+    spec = load_fit(args.fit)
+    check_writable(args.out, 'the result')
+    warm_up()
+    start = time.perf_counter()
+    result = fit(FitProblem(spec))
+    Path(args.out).write_text(yaml.safe_dump(result.as_mapping(), sort_keys=False),
+                              encoding='utf-8')
+    for key, estimate, stderr in zip(result.keys, result.estimate, result.stderr):
+        err.write(f'{key} = {estimate:.6g} +- {stderr:.3g}\n')
+    for warning in result.warnings:
+        err.write(f'warning: {warning}\n')
+    err.write(f'{result.simulations} simulations in {time.perf_counter() - start:.1f} s, cost '
+              f'{result.cost:.3g} m^2; result written to {args.out}\n')
+    return 0
+
+
 SWEEP_INSTALL = ('the sweep runs on Dask, which is not installed; install it with '
                  "pip install 'cone_feeder_sim[sweep]' (or pip install 'dask[distributed]')")
 
@@ -359,6 +389,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return cmd_sweep(args, sys.stderr)
         if args.command == 'compile':
             return cmd_compile(sys.stderr)
+        if args.command == 'fit':
+            return cmd_fit(args, sys.stderr)
     except ConeFeederError as exc:
         sys.stderr.write(f'error: {exc}\n')
         return 2

@@ -1,0 +1,85 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The residuals of a fit: the scenario simulated with given values, compared with the tracks.
+
+:func:`predict` runs the headless simulator through the tracked times and returns where each
+tracked piece is at each of them (a piece that left the cone stays where it left, a piece
+whose integration failed where it was last). :class:`FitProblem` maps a parameter vector to
+the residual vector (m): predicted minus tracked x and y (and z where tracked), one row per
+observation.
+"""
+
+import numpy as np
+
+from .spec import FitSpec
+from .tracks import Tracks
+from ..feeder.scenario import Scenario
+from ..formats.scenario_file import scenario_from_mapping
+from ..physics.simulation import SimParams, Simulator
+
+__all__ = ['FitProblem', 'predict']
+
+
+def predict(scenario: Scenario, tracks: Tracks) -> np.ndarray:
+    """Return the simulated positions (M, 3) (m, world frame) at the tracks' rows."""
+    sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
+    for spec in scenario.particles:
+        sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
+                [spec.product])
+    last = np.array([spec.position for spec in scenario.particles], dtype=float)
+    out = np.empty((len(tracks), 3))
+    times, first = np.unique(tracks.t, return_index=True)
+    bounds = list(first) + [len(tracks)]
+    for k, t in enumerate(times):
+        if t > sim.t:
+            step = sim.advance_to(float(t))
+            if len(step.exits):
+                last[step.exits.ids] = step.exits.position
+            for failure in step.failures:
+                if np.all(np.isfinite(failure.position)):
+                    last[failure.particle_id] = failure.position
+        if sim.state.count:
+            last[sim.state.ids] = sim.world()[0]
+        rows = slice(bounds[k], bounds[k + 1])
+        out[rows] = last[tracks.particle[rows]]
+    return out
+
+
+class FitProblem:
+    """The residuals of a fit as a function of the free values; counts the simulations."""
+
+    def __init__(self, spec: FitSpec) -> None:
+        """Keep the fit; no simulation runs yet."""
+        self.spec = spec
+        self.simulations = 0
+        self._columns = 3 if spec.tracks.has_z else 2
+
+    def scenario(self, values: np.ndarray) -> Scenario:
+        """Return the scenario with the free keys set to ``values``."""
+        return scenario_from_mapping(self.spec.scenario_mapping(values), self.spec.base_dir)
+
+    def residuals(self, values: np.ndarray) -> np.ndarray:
+        """Return predicted minus tracked positions (m), (M * 2,) or (M * 3,) with z."""
+        self.simulations += 1
+        tracks = self.spec.tracks
+        diff = predict(self.scenario(values), tracks) - tracks.xyz
+        return diff[:, :self._columns].reshape(-1)
+
+    def piece_rms(self, values: np.ndarray) -> dict[int, float]:
+        """Return the root mean square residual (m) of each tracked piece."""
+        rows = self.residuals(values).reshape(len(self.spec.tracks), self._columns)
+        return {int(p): float(np.sqrt(np.mean(rows[self.spec.tracks.particle == p] ** 2)))
+                for p in np.unique(self.spec.tracks.particle)}

@@ -1,0 +1,194 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Fit files: a scenario, tracks of its pieces and the keys to fit, validated before any run.
+
+A fit file is a YAML mapping::
+
+    scenario: base.yaml      # start positions and rotation history, as for `run`
+    tracks: tracks.csv       # columns particle, t, x, y (m, world frame; z optional)
+    free:                    # dotted scenario keys -> [low, high]
+      model.d: [10.0, 1000.0]
+      model.mu_C: [0.3, 0.98]
+    residual: trajectory     # positions at the tracked times
+    loss: linear             # or soft_l1, huber, cauchy, arctan (scipy's robust losses)
+    starts: 1                # > 1: also from starts - 1 points drawn in the bounds (seeded)
+
+Paths are relative to the fit file. Each free key starts from its value in the scenario, or
+for ``model.<key>`` from the parameter file's. Every problem is named with its key.
+"""
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+import math
+from pathlib import Path
+from typing import Any
+
+from .tracks import read_tracks_csv, Tracks
+from ..errors import ConeFeederError, ScenarioError
+from ..formats.parameter_file import read_yaml
+from ..formats.runlog import model_parameter_values
+from ..formats.scenario_file import scenario_from_mapping, set_scenario_key
+from ..physics.simulation import cone_surface_height
+
+__all__ = ['FitSpec', 'fit_from_mapping', 'load_fit', 'LOSSES', 'RESIDUALS']
+
+FIT_KEYS = ('scenario', 'tracks', 'free', 'residual', 'loss', 'starts')
+#: What the residuals compare (``exits``: later).
+RESIDUALS = ('trajectory',)
+#: scipy.optimize.least_squares' losses.
+LOSSES = ('linear', 'soft_l1', 'huber', 'cauchy', 'arctan')
+#: How far outside the cone's rim (m) a tracked position may be (tracking noise).
+RIM_SLACK = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class FitSpec:
+    """
+    A validated fit: the base scenario mapping and its directory, the tracks, the free keys.
+
+    keys: the free dotted keys; bounds (low, high) and start value of each; residual, loss,
+    starts as in the file.
+    """
+
+    mapping: Mapping[str, Any]
+    base_dir: Path | None
+    tracks: Tracks
+    keys: tuple[str, ...]
+    bounds: tuple[tuple[float, float], ...]
+    start: tuple[float, ...]
+    residual: str = 'trajectory'
+    loss: str = 'linear'
+    starts: int = 1
+
+    def scenario_mapping(self, values: Any) -> dict[str, Any]:
+        """Return the scenario mapping with the free keys set to ``values``."""
+        mapping = dict(self.mapping)
+        for key, value in zip(self.keys, values):
+            mapping = set_scenario_key(mapping, key, float(value))
+        return mapping
+
+
+def _lookup(mapping: Mapping[str, Any], key: str) -> Any:
+    node: Any = mapping
+    for part in key.split('.'):
+        if isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        elif isinstance(node, Mapping) and part in node:
+            node = node[part]
+        else:
+            return None
+    return node
+
+
+def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
+    """Validate a parsed fit file; raise ScenarioError naming the key."""
+    if not isinstance(content, Mapping):
+        raise ScenarioError(f'a fit must be a mapping with the keys {", ".join(FIT_KEYS)}')
+    unknown = sorted(str(k) for k in set(content) - set(FIT_KEYS))
+    if unknown:
+        raise ScenarioError(f'unknown fit key(s) {", ".join(map(repr, unknown))}; known: '
+                            f'{", ".join(FIT_KEYS)}')
+    for key in ('scenario', 'tracks', 'free'):
+        if key not in content:
+            raise ScenarioError(f'the fit is missing the key {key!r}')
+    raw = content['scenario']
+    scenario_dir = base_dir
+    if isinstance(raw, (str, Path)):
+        path = Path(raw) if base_dir is None or Path(raw).is_absolute() else base_dir / raw
+        raw = read_yaml(path)
+        scenario_dir = path.parent
+    if not isinstance(raw, Mapping):
+        raise ScenarioError('scenario must be a scenario file or a mapping')
+    mapping = dict(raw)
+    if mapping.get('parameters') is not None and scenario_dir is not None:
+        parameters = Path(str(mapping['parameters']))
+        if not parameters.is_absolute():
+            mapping['parameters'] = str(scenario_dir / parameters)
+    scenario = scenario_from_mapping(mapping, scenario_dir)
+    tracks_path = Path(str(content['tracks']))
+    if base_dir is not None and not tracks_path.is_absolute():
+        tracks_path = base_dir / tracks_path
+    tracks = read_tracks_csv(tracks_path)
+    pieces = len(scenario.particles)
+    strangers = sorted(set(tracks.particle.tolist()) - set(range(pieces)))
+    if strangers:
+        raise ScenarioError(f'tracks: particle(s) {", ".join(map(str, strangers))} are not in '
+                            f'the scenario (its particles are 0..{pieces - 1})')
+    rho = (tracks.xyz[:, 0] ** 2 + tracks.xyz[:, 1] ** 2) ** 0.5
+    outside = rho > scenario.model.r + RIM_SLACK
+    if outside.any():
+        i = int(outside.argmax())
+        raise ScenarioError(f'tracks: particle {tracks.particle[i]} at t = {tracks.t[i]:g} s is '
+                            f'{rho[i]:.3f} m from the axis, outside the cone (radius '
+                            f'{scenario.model.r:g} m)')
+    if tracks.has_z:
+        surface = [cone_surface_height(scenario.model, x, y) for x, y, _ in tracks.xyz]
+        if (tracks.xyz[:, 2] < min(surface) - 0.05).any():
+            raise ScenarioError('tracks: a z is more than 5 cm below the cone surface')
+    if tracks.t.min() < 0.0 or tracks.t.max() > scenario.duration:
+        raise ScenarioError(f'tracks: times must lie in [0, duration = {scenario.duration:g} '
+                            f's], got {tracks.t.min():g} .. {tracks.t.max():g} s')
+    free = content['free']
+    if not isinstance(free, Mapping) or not free:
+        raise ScenarioError('free must be a non-empty mapping of dotted scenario keys to '
+                            '[low, high]')
+    defaults = model_parameter_values(scenario.model)
+    keys, bounds, start = [], [], []
+    for key, limits in free.items():
+        key = str(key)
+        if (not isinstance(limits, (list, tuple)) or len(limits) != 2
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                           and math.isfinite(v) for v in limits)):
+            raise ScenarioError(f'free.{key} must be [low, high] (two finite numbers), got '
+                                f'{limits!r}')
+        low, high = float(limits[0]), float(limits[1])
+        if not low < high:
+            raise ScenarioError(f'free.{key}: the range [{low:g}, {high:g}] is empty')
+        value = _lookup(mapping, key)
+        if value is None:
+            value = defaults.get(key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ScenarioError(f'free.{key}: no numeric start value in the scenario or the '
+                                'parameter file')
+        for probe in (low, high):
+            try:
+                scenario_from_mapping(set_scenario_key(mapping, key, probe), scenario_dir)
+            except ConeFeederError as exc:
+                raise ScenarioError(f'free.{key} = {probe:g}: {exc}') from None
+        keys.append(key)
+        bounds.append((low, high))
+        start.append(min(max(float(value), low), high))
+    residual = content.get('residual', 'trajectory')
+    if residual not in RESIDUALS:
+        raise ScenarioError(f'residual must be one of {", ".join(RESIDUALS)}, got {residual!r}')
+    loss = content.get('loss', 'linear')
+    if loss not in LOSSES:
+        raise ScenarioError(f'loss must be one of {", ".join(LOSSES)}, got {loss!r}')
+    starts = content.get('starts', 1)
+    if isinstance(starts, bool) or not isinstance(starts, int) or not 1 <= starts <= 100:
+        raise ScenarioError(f'starts must be an integer in [1, 100], got {starts!r}')
+    return FitSpec(mapping=mapping, base_dir=scenario_dir, tracks=tracks, keys=tuple(keys),
+                   bounds=tuple(bounds), start=tuple(start), residual=residual, loss=loss,
+                   starts=starts)
+
+
+def load_fit(path: str | Path) -> FitSpec:
+    """Read and validate a fit file (paths in it relative to it)."""
+    path = Path(path)
+    try:
+        return fit_from_mapping(read_yaml(path), path.parent)
+    except ConeFeederError as exc:
+        raise ScenarioError(f'{path}: {exc}') from exc

@@ -1,0 +1,150 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Tests of the fit room: synthetic truth recovered, weak parameters flagged, bad input named."""
+
+import csv
+from pathlib import Path
+
+from cone_feeder_sim.cli import main
+from cone_feeder_sim.errors import ScenarioError
+from cone_feeder_sim.fit.problem import FitProblem, predict
+from cone_feeder_sim.fit.solve import fit
+from cone_feeder_sim.fit.spec import fit_from_mapping, load_fit
+from cone_feeder_sim.fit.tracks import read_tracks_csv, Tracks
+from cone_feeder_sim.formats.scenario_file import scenario_from_mapping, set_scenario_key
+import numpy as np
+import pytest
+import yaml
+
+#: Five pieces lying on the cone, clockwise then counter-clockwise: 3 s.
+BASE = {'duration': 3.0, 'rotation': [[0.0, 0.0], [0.5, -8.0], [1.5, -8.0], [2.0, 6.0]],
+        'particles': [{'position': p, 'on_surface': True} for p in (
+            [0.11, -0.01, 0.0], [-0.10, -0.01, 0.0], [0.08, -0.13, 0.0], [-0.07, 0.04, 0.0],
+            [0.14, 0.06, 0.0])]}
+FREE = {'model.d': [10.0, 1000.0], 'model.mu_C': [0.3, 0.98]}
+
+
+def write_tracks(path: Path, scenario: dict, rate: float, noise: float, seed: int) -> Path:
+    """Simulate ``scenario`` and write its pieces' tracks at ``rate`` frames/s with noise (m)."""
+    duration = scenario['duration']
+    times = np.arange(0.0, duration, 1.0 / rate)
+    count = len(scenario['particles'])
+    particle = np.tile(np.arange(count), len(times))
+    t = np.repeat(times, count)
+    truth = predict(scenario_from_mapping(scenario), Tracks(particle, t, np.zeros((len(t), 3))))
+    seen = truth + np.random.default_rng(seed).normal(0.0, noise, truth.shape)
+    with path.open('w', newline='') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(['particle', 't', 'x', 'y'])
+        writer.writerows((p, f'{s:.6f}', f'{x:.6f}', f'{y:.6f}')
+                         for p, s, (x, y, _) in zip(particle, t, seen))
+    return path
+
+
+def test_a_synthetic_truth_is_recovered_within_two_standard_errors(tmp_path: Path) -> None:
+    # the truth 40 % away from the parameter file's d and 15 % from its mu_C
+    truth = set_scenario_key(set_scenario_key(BASE, 'model.d', 315.0), 'model.mu_C', 0.7225)
+    write_tracks(tmp_path / 'tracks.csv', truth, 30.0, 0.001, 0)
+    spec = fit_from_mapping({'scenario': BASE, 'tracks': 'tracks.csv', 'free': FREE}, tmp_path)
+    assert spec.start == (225.0, 0.85)  # the parameter file's values
+    result = fit(FitProblem(spec))
+    assert result.success and result.warnings == []
+    for key, value, estimate, stderr, low, high in zip(
+            result.keys, (315.0, 0.7225), result.estimate, result.stderr, result.low,
+            result.high):
+        assert abs(estimate - value) < 2.0 * stderr, key
+        assert low < estimate < high and stderr < 0.01 * value
+    # the residual is the tracks' noise: 1 mm in x and y
+    assert all(0.0008 < rms < 0.0012 for rms in result.piece_rms.values())
+    mapping = result.as_mapping()
+    assert mapping['simulations'] == result.simulations > 5
+    assert mapping['correlation']['model.d']['model.mu_C'] == pytest.approx(
+        result.correlation[0, 1])
+
+
+def test_a_parameter_the_data_hardly_see_is_named(tmp_path: Path) -> None:
+    # 80 ms of pieces slipping fast on a cone turning at 12 rad/s: their slip stays far
+    # above v_S, where mu_S hardly acts
+    scenario = {'duration': 0.08, 'rotation': [[0.0, -12.0]], 'particles': [
+        {'position': p, 'on_surface': True, 'velocity': [0.0, 0.0, 0.0]}
+        for p in ([0.11, -0.01, 0.0], [-0.10, -0.01, 0.0], [0.08, -0.13, 0.0])]}
+    write_tracks(tmp_path / 'tracks.csv', scenario, 500.0, 0.001, 1)
+    spec = fit_from_mapping({'scenario': scenario, 'tracks': 'tracks.csv',
+                             'free': {'model.mu_S': [0.5, 2.0], 'model.mu_C': [0.3, 0.98]}},
+                            tmp_path)
+    result = fit(FitProblem(spec))
+    assert any(w.startswith('model.mu_S') for w in result.warnings), result.warnings
+    assert not any(w.startswith('model.mu_C') for w in result.warnings)
+
+
+def test_the_command_writes_the_result(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    truth = set_scenario_key(BASE, 'model.d', 315.0)
+    write_tracks(tmp_path / 'tracks.csv', {**truth, 'duration': 1.5}, 25.0, 0.001, 2)
+    (tmp_path / 'base.yaml').write_text(yaml.safe_dump({**BASE, 'duration': 1.5}))
+    (tmp_path / 'fit.yaml').write_text(yaml.safe_dump({
+        'scenario': 'base.yaml', 'tracks': 'tracks.csv', 'free': {'model.d': [10.0, 1000.0]},
+        'loss': 'soft_l1'}))
+    out = tmp_path / 'result.yaml'
+    assert main(['fit', str(tmp_path / 'fit.yaml'), '--out', str(out)]) == 0
+    result = yaml.safe_load(out.read_text())
+    d = result['parameters']['model.d']
+    assert abs(d['estimate'] - 315.0) < 3.0 * d['stderr'] and d['low'] < 315.0 < d['high']
+    assert set(result) >= {'parameters', 'correlation', 'cost', 'simulations', 'warnings',
+                           'piece_rms'}
+    assert 'model.d = ' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('change, fragment', [
+    ({'free': {'model.d': [100.0, 10.0]}}, 'free.model.d: the range [100, 10] is empty'),
+    ({'free': {'model.dd': [1.0, 2.0]}}, 'free.model.dd: no numeric start value'),
+    ({'free': {'model.d': [-5.0, 10.0]}}, "parameter 'd' = -5 is out of range"),
+    ({'free': {}}, 'free must be a non-empty mapping'),
+    ({'speed': 1}, "unknown fit key(s) 'speed'"),
+    ({'loss': 'square'}, 'loss must be one of linear'),
+    ({'residual': 'angles'}, 'residual must be one of trajectory'),
+    ({'starts': 0}, 'starts must be an integer'),
+])
+def test_bad_fits_are_refused_with_the_key_named(tmp_path: Path, change: dict,
+                                                 fragment: str) -> None:
+    (tmp_path / 'tracks.csv').write_text('particle,t,x,y\n0,0.1,0.1,0.0\n')
+    content = {'scenario': BASE, 'tracks': 'tracks.csv', 'free': FREE, **change}
+    with pytest.raises(ScenarioError) as info:
+        fit_from_mapping(content, tmp_path)
+    assert fragment in str(info.value)
+
+
+@pytest.mark.parametrize('rows, fragment', [
+    ('particle,t,x,y\n7,0.1,0.1,0.0\n', 'particle(s) 7 are not in the scenario'),
+    ('particle,t,x,y\n0,0.1,0.5,0.0\n',
+     'particle 0 at t = 0.1 s is 0.500 m from the axis, outside the cone'),
+    ('particle,t,x\n0,0.1,0.1\n', 'missing y'),
+    ('particle,t,x,y\n0,abc,0.1,0.0\n', 'line 2'),
+    ('particle,t,x,y\n0,9.0,0.1,0.0\n', 'times must lie in [0, duration = 3 s]'),
+])
+def test_bad_tracks_are_refused(tmp_path: Path, rows: str, fragment: str) -> None:
+    (tmp_path / 'tracks.csv').write_text(rows)
+    (tmp_path / 'fit.yaml').write_text(yaml.safe_dump(
+        {'scenario': BASE, 'tracks': 'tracks.csv', 'free': FREE}))
+    with pytest.raises(ScenarioError) as info:
+        load_fit(tmp_path / 'fit.yaml')
+    assert fragment in str(info.value)
+
+
+def test_tracks_are_sorted_and_z_is_optional(tmp_path: Path) -> None:
+    path = tmp_path / 'tracks.csv'
+    path.write_text('particle,t,x,y\n1,0.2,0.1,0.0\n0,0.2,0.0,0.1\n0,0.1,0.1,0.1\n')
+    tracks = read_tracks_csv(path)
+    assert tracks.t.tolist() == [0.1, 0.2, 0.2] and tracks.particle.tolist() == [0, 0, 1]
+    assert not tracks.has_z and len(tracks) == 3
