@@ -148,3 +148,19 @@ def test_tracks_are_sorted_and_z_is_optional(tmp_path: Path) -> None:
     tracks = read_tracks_csv(path)
     assert tracks.t.tolist() == [0.1, 0.2, 0.2] and tracks.particle.tolist() == [0, 0, 1]
     assert not tracks.has_z and len(tracks) == 3
+
+
+def test_the_95_percent_intervals_cover_the_truth_over_20_seeds(tmp_path: Path) -> None:
+    # noisy tracks of the same truth, 20 noise seeds: about 19 intervals of 20 should cover
+    base = {**BASE, 'duration': 1.0, 'particles': BASE['particles'][:3]}
+    truth_values = np.array([315.0, 0.7225])
+    truth = set_scenario_key(set_scenario_key(base, 'model.d', 315.0), 'model.mu_C', 0.7225)
+    covered = np.zeros(2, dtype=int)
+    for seed in range(20):
+        folder = tmp_path / str(seed)
+        folder.mkdir()
+        write_tracks(folder / 'tracks.csv', truth, 30.0, 0.001, 100 + seed)
+        result = fit(FitProblem(fit_from_mapping(
+            {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE}, folder)))
+        covered += (result.low < truth_values) & (truth_values < result.high)
+    assert all(15 <= c <= 20 for c in covered), covered
