@@ -18,7 +18,9 @@ Fit files: a scenario, tracks of its pieces and the keys to fit, validated befor
 A fit file is a YAML mapping::
 
     scenario: base.yaml      # start positions and rotation history, as for `run`
-    tracks: tracks.csv       # columns particle, t, x, y (m, world frame; z optional)
+    tracks: tracks.csv       # columns particle, t, x, y (m, world frame; z optional), or a
+                             # recording RUN.mcap (its particle_states)
+    tracks_every: 1          # a recording's every n-th particle_states message
     free:                    # dotted scenario keys -> [low, high]
       model.d: [10.0, 1000.0]
       model.mu_C: [0.3, 0.98]
@@ -36,7 +38,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from .tracks import read_tracks_csv, Tracks
+from .tracks import read_tracks, Tracks
 from ..errors import ConeFeederError, ScenarioError
 from ..formats.parameter_file import read_yaml
 from ..formats.runlog import model_parameter_values
@@ -45,7 +47,7 @@ from ..physics.simulation import cone_surface_height
 
 __all__ = ['FitSpec', 'fit_from_mapping', 'load_fit', 'LOSSES', 'RESIDUALS']
 
-FIT_KEYS = ('scenario', 'tracks', 'free', 'residual', 'loss', 'starts')
+FIT_KEYS = ('scenario', 'tracks', 'tracks_every', 'free', 'residual', 'loss', 'starts')
 #: What the residuals compare (``exits``: later).
 RESIDUALS = ('trajectory',)
 #: scipy.optimize.least_squares' losses.
@@ -121,7 +123,10 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     tracks_path = Path(str(content['tracks']))
     if base_dir is not None and not tracks_path.is_absolute():
         tracks_path = base_dir / tracks_path
-    tracks = read_tracks_csv(tracks_path)
+    every = content.get('tracks_every', 1)
+    if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+        raise ScenarioError(f'tracks_every must be a positive integer, got {every!r}')
+    tracks = read_tracks(tracks_path, every)
     pieces = len(scenario.particles)
     strangers = sorted(set(tracks.particle.tolist()) - set(range(pieces)))
     if strangers:

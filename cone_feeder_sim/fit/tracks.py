@@ -18,6 +18,10 @@ Tracks of pieces: where each was seen, when, in the world frame.
 A CSV file with the columns ``particle`` (the 0-based index of the piece in the scenario's
 ``particles``), ``t`` (s), ``x``, ``y`` (m, world frame) and optionally ``z`` (m). Rows may come
 in any order; tracks may be sparse (a video at 25-30 frames/s), start late and end early.
+Or a recording (``.mcap``, a headless run's or ``sim_node``'s): its ``particle_states``
+(ids, x, y, z at each message's stamp), so a simulated run with known parameters is a first
+test subject; ``every`` keeps every n-th message (a 50-Hz recording thinned to a video's
+rate).
 """
 
 import csv
@@ -27,9 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ScenarioError
+from ..errors import ConeFeederError, ScenarioError
+from ..formats.cdr import default_codec
+from ..formats.mcap_reader import open_recording, parse_run_source
+from ..formats.pointcloud import cloud_points
 
-__all__ = ['Tracks', 'read_tracks_csv']
+__all__ = ['read_tracks', 'read_tracks_csv', 'read_tracks_mcap', 'Tracks']
 
 #: The columns a tracks file must have (``z`` is optional).
 COLUMNS = ('particle', 't', 'x', 'y')
@@ -89,3 +96,42 @@ def read_tracks_csv(path: str | Path) -> Tracks:
     rows.sort()
     table = np.array(rows)
     return Tracks(particle=table[:, 1].astype(np.int64), t=table[:, 0], xyz=table[:, 2:5])
+
+
+#: The type of the recorded piece states.
+STATES_TYPE = 'sensor_msgs/msg/PointCloud2'
+
+
+def read_tracks_mcap(path: str | Path, every: int = 1) -> Tracks:
+    """Read the pieces' states of a recording (every ``every``-th particle_states message)."""
+    try:
+        recording = open_recording(parse_run_source(str(path)))
+        topics = {name for name, topic in recording.topics.items()
+                  if name.endswith('particle_states') and topic.type_name == STATES_TYPE}
+        if not topics:
+            raise ScenarioError(f'{path}: no particle_states topic to take tracks from')
+        codec = default_codec()
+        parts = []
+        for k, message in enumerate(recording.messages(topics=topics)):
+            if k % every:
+                continue
+            points = cloud_points(codec.decode(STATES_TYPE, message.data, strict=False))
+            parts.append(np.column_stack([
+                np.full(points.shape[0], message.log_time_ns * 1e-9),
+                points['id'].astype(np.float64), points['x'], points['y'], points['z']]))
+    except ScenarioError:
+        raise
+    except ConeFeederError as exc:
+        raise ScenarioError(f'cannot read the tracks {path}: {exc}') from exc
+    if not parts:
+        raise ScenarioError(f'{path}: no tracks')
+    table = np.concatenate(parts)
+    table = table[np.lexsort((table[:, 1], table[:, 0]))]
+    return Tracks(particle=table[:, 1].astype(np.int64), t=table[:, 0], xyz=table[:, 2:5])
+
+
+def read_tracks(path: str | Path, every: int = 1) -> Tracks:
+    """Read tracks from a CSV file or, for ``.mcap``, from a recording."""
+    if str(path).endswith('.mcap'):
+        return read_tracks_mcap(path, every)
+    return read_tracks_csv(path)

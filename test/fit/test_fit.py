@@ -164,3 +164,17 @@ def test_the_95_percent_intervals_cover_the_truth_over_20_seeds(tmp_path: Path) 
             {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE}, folder)))
         covered += (result.low < truth_values) & (truth_values < result.high)
     assert all(15 <= c <= 20 for c in covered), covered
+
+
+def test_a_recorded_run_is_a_test_subject(tmp_path: Path) -> None:
+    truth = set_scenario_key({**BASE, 'duration': 1.5}, 'model.d', 400.0)
+    (tmp_path / 'truth.yaml').write_text(yaml.safe_dump(truth))
+    assert main(['run', str(tmp_path / 'truth.yaml'), '--events', str(tmp_path / 'e.csv'),
+                 '--mcap', str(tmp_path / 'run.mcap'), '--quiet']) == 0
+    spec = fit_from_mapping({'scenario': {**BASE, 'duration': 1.5}, 'tracks': 'run.mcap',
+                             'tracks_every': 3, 'free': {'model.d': [10.0, 1000.0]}},
+                            tmp_path)
+    assert spec.tracks.has_z and set(spec.tracks.particle.tolist()) == set(range(5))
+    assert np.diff(np.unique(spec.tracks.t)).min() == pytest.approx(0.03)
+    result = fit(FitProblem(spec))
+    assert result.estimate[0] == pytest.approx(400.0, rel=1e-4)  # no noise: the truth
