@@ -197,6 +197,8 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument('fit', metavar='FIT.yaml', help='fit file: scenario, tracks, free keys')
     fit.add_argument('--out', required=True, metavar='RESULT.yaml',
                      help='where to write the estimates, errors and correlations')
+    fit.add_argument('--report', metavar='PNG',
+                     help='draw the tracks against the fitted simulation, and the residuals')
     recover = sub.add_parser(
         'recover', help='copy the readable part of an unfinished or damaged MCAP file into a '
                         'complete one (with summary and footer)')
@@ -298,9 +300,12 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
 
     spec = load_fit(args.fit)
     check_writable(args.out, 'the result')
+    if args.report:
+        check_writable(args.report, 'the report')
     warm_up()
     start = time.perf_counter()
-    result = fit(FitProblem(spec))
+    problem = FitProblem(spec)
+    result = fit(problem)
     Path(args.out).write_text(yaml.safe_dump(result.as_mapping(), sort_keys=False),
                               encoding='utf-8')
     for key, estimate, stderr in zip(result.keys, result.estimate, result.stderr):
@@ -309,6 +314,10 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
         err.write(f'warning: {warning}\n')
     err.write(f'{result.simulations} simulations in {time.perf_counter() - start:.1f} s, cost '
               f'{result.cost:.3g} m^2; result written to {args.out}\n')
+    if args.report:
+        from .fit.figure import draw_fit
+        draw_fit(problem, result, args.report)
+        err.write(f'report written to {args.report}\n')
     return 0
 
 

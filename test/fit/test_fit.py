@@ -97,7 +97,10 @@ def test_the_command_writes_the_result(tmp_path: Path, capsys: pytest.CaptureFix
         'scenario': 'base.yaml', 'tracks': 'tracks.csv', 'free': {'model.d': [10.0, 1000.0]},
         'loss': 'soft_l1'}))
     out = tmp_path / 'result.yaml'
-    assert main(['fit', str(tmp_path / 'fit.yaml'), '--out', str(out)]) == 0
+    png = tmp_path / 'fit.png'
+    assert main(['fit', str(tmp_path / 'fit.yaml'), '--out', str(out), '--report',
+                 str(png)]) == 0
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 20000
     result = yaml.safe_load(out.read_text())
     d = result['parameters']['model.d']
     assert abs(d['estimate'] - 315.0) < 3.0 * d['stderr'] and d['low'] < 315.0 < d['high']

@@ -1,0 +1,69 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The report of a fit (PNG, matplotlib's Agg canvas, no display).
+
+Left: the tracks (dots) and the fitted simulation (lines) seen from above, one colour per
+piece, with the cone's rim. Right: each piece's residual distance (mm) over time.
+"""
+
+from pathlib import Path
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+import numpy as np
+
+from .problem import FitProblem, predict
+from .solve import FitResult
+from ..errors import ReportError
+
+__all__ = ['draw_fit']
+
+
+def draw_fit(problem: FitProblem, result: FitResult, path: str | Path) -> None:
+    """Draw the tracks against the fitted simulation and the residuals into ``path``."""
+    spec = problem.spec
+    tracks = spec.tracks
+    scenario = problem.scenario(result.estimate)
+    fitted = predict(scenario, tracks)
+    figure = Figure(figsize=(11, 5), dpi=100)
+    FigureCanvasAgg(figure)
+    top, residual = figure.subplots(1, 2)
+    rim = np.linspace(0.0, 2.0 * np.pi, 200)
+    top.plot(scenario.model.r * np.cos(rim), scenario.model.r * np.sin(rim), color='grey',
+             linewidth=0.8)
+    for piece in np.unique(tracks.particle):
+        rows = tracks.particle == piece
+        line, = top.plot(fitted[rows, 0], fitted[rows, 1], linewidth=1.2,
+                         label=f'piece {piece}')
+        top.plot(tracks.xyz[rows, 0], tracks.xyz[rows, 1], '.', markersize=2.5,
+                 color=line.get_color())
+        distance = np.hypot(*(fitted[rows, :2] - tracks.xyz[rows, :2]).T)
+        residual.plot(tracks.t[rows], 1e3 * distance, color=line.get_color(), linewidth=1.0)
+    top.set_aspect('equal')
+    top.set_xlabel('x (m)')
+    top.set_ylabel('y (m)')
+    top.set_title('tracks (dots) and the fitted simulation (lines)')
+    top.legend(fontsize=7, loc='upper right')
+    residual.set_xlabel('t (s)')
+    residual.set_ylabel('distance fitted - tracked (mm)')
+    estimates = ', '.join(f'{k} = {e:.4g} +- {s:.2g}' for k, e, s in zip(
+        result.keys, result.estimate, result.stderr))
+    residual.set_title(estimates, fontsize=8)
+    figure.tight_layout()
+    try:
+        figure.savefig(path)
+    except OSError as exc:
+        raise ReportError(f'cannot write the fit report {path}: {exc}') from exc
