@@ -22,6 +22,8 @@ the residual vector (m): predicted minus tracked x and y (and z where tracked), 
 observation.
 """
 
+import threading
+
 import numpy as np
 
 from .spec import FitSpec
@@ -65,6 +67,7 @@ class FitProblem:
         """Keep the fit; no simulation runs yet."""
         self.spec = spec
         self.simulations = 0
+        self._lock = threading.Lock()
         self._columns = 3 if spec.tracks.has_z else 2
 
     def scenario(self, values: np.ndarray) -> Scenario:
@@ -73,7 +76,8 @@ class FitProblem:
 
     def residuals(self, values: np.ndarray) -> np.ndarray:
         """Return predicted minus tracked positions (m), (M * 2,) or (M * 3,) with z."""
-        self.simulations += 1
+        with self._lock:  # simulations may run on several threads (a global search)
+            self.simulations += 1
         tracks = self.spec.tracks
         diff = predict(self.scenario(values), tracks) - tracks.xyz
         return diff[:, :self._columns].reshape(-1)

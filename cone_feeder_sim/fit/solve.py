@@ -16,7 +16,11 @@
 Bounded least squares of a fit, with standard errors, correlations and warnings.
 
 ``scipy.optimize.least_squares`` (trust-region reflective, bounds, finite-difference
-Jacobian) searches θ: log p for a parameter whose range is positive, p otherwise. At the
+Jacobian) searches θ: log p for a parameter whose range is positive, p otherwise. With
+``method: global``, ``scipy.optimize.differential_evolution`` first searches the whole box
+of bounds for the least sum of squares (seeded, its generations' simulations on
+``workers`` threads: the compiled kernels release the GIL), and least squares then starts
+from its best point: for multimodal cases, where a local search stops in the wrong valley. At the
 optimum, with J the Jacobian in θ and s² = |r|² / (m - n) the residual variance, the
 covariance of θ is s² (JᵀJ)⁻¹; the delta method carries it to p (dp/dθ = p in log scale).
 The 95 % interval is θ ± 1.96 σ_θ mapped back (so it stays positive in log scale).
@@ -28,12 +32,14 @@ standard error larger than the estimate, or a 95 % interval wider than
 :data:`INTERVAL_SHARE` of the key's free range (in θ: the data hardly narrow it).
 """
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 import math
+import os
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import differential_evolution, least_squares
 
 from .problem import FitProblem
 
@@ -110,6 +116,8 @@ def fit(problem: FitProblem) -> FitResult:
         return np.where(logs, np.log(np.where(logs, p, 1.0)), p)
 
     starts = [np.clip(theta_of(np.array(spec.start)), lb, ub)]
+    if spec.method == 'global':
+        starts = [_global_search(problem, values, lb, ub)]
     rng = np.random.default_rng(STARTS_SEED)
     starts += [rng.uniform(lb, ub) for _ in range(spec.starts - 1)]
     best = None
@@ -121,6 +129,24 @@ def fit(problem: FitProblem) -> FitResult:
             best = result
     assert best is not None
     return _statistics(problem, best, values(best.x), logs)
+
+
+def _global_search(problem: FitProblem, values: Any, lb: np.ndarray,
+                   ub: np.ndarray) -> np.ndarray:
+    """Return the best θ of a differential evolution over the box [lb, ub]."""
+    options = dict(problem.spec.global_options)
+
+    def cost(theta: np.ndarray) -> float:
+        residuals = problem.residuals(values(theta))
+        return float(residuals @ residuals)
+
+    workers = problem.spec.workers or os.cpu_count() or 1
+    with ThreadPoolExecutor(workers) as pool:
+        result = differential_evolution(
+            cost, list(zip(lb, ub)), popsize=options['popsize'], maxiter=options['maxiter'],
+            seed=options['seed'], polish=False, updating='deferred', workers=pool.map,
+            tol=1e-8)
+    return np.asarray(result.x)
 
 
 def _statistics(problem: FitProblem, result: Any, estimate: np.ndarray,

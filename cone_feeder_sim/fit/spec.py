@@ -27,9 +27,14 @@ A fit file is a YAML mapping::
     residual: trajectory     # positions at the tracked times
     loss: linear             # or soft_l1, huber, cauchy, arctan (scipy's robust losses)
     starts: 1                # > 1: also from starts - 1 points drawn in the bounds (seeded)
+    method: local            # or global: differential evolution over the bounds, then local
+    global: {popsize: 8, maxiter: 15, seed: 0}   # the differential evolution (method: global)
+    workers: 1               # threads that run the simulations of one generation (0: cores)
 
 Paths are relative to the fit file. Each free key starts from its value in the scenario, or
-for ``model.<key>`` from the parameter file's. Every problem is named with its key.
+for ``model.<key>`` from the parameter file's. The knots of the rotation history are free
+keys too: ``rotation.K.t`` and ``rotation.K.omega`` (row K of the table, also
+``rotation.K.0`` and ``rotation.K.1``). Every problem is named with its key.
 """
 
 from collections.abc import Mapping
@@ -47,7 +52,14 @@ from ..physics.simulation import cone_surface_height
 
 __all__ = ['FitSpec', 'fit_from_mapping', 'load_fit', 'LOSSES', 'RESIDUALS']
 
-FIT_KEYS = ('scenario', 'tracks', 'tracks_every', 'free', 'residual', 'loss', 'starts')
+FIT_KEYS = ('scenario', 'tracks', 'tracks_every', 'free', 'residual', 'loss', 'starts',
+            'method', 'global', 'workers')
+#: The searches: least squares from the start values, or differential evolution first.
+METHODS = ('local', 'global')
+#: The keys of ``global:`` and their defaults.
+GLOBAL_DEFAULTS = {'popsize': 8, 'maxiter': 15, 'seed': 0}
+#: Names of a rotation knot's two numbers.
+KNOT_PARTS = {'t': '0', 'omega': '1'}
 #: What the residuals compare (``exits``: later).
 RESIDUALS = ('trajectory',)
 #: scipy.optimize.least_squares' losses.
@@ -62,7 +74,7 @@ class FitSpec:
     A validated fit: the base scenario mapping and its directory, the tracks, the free keys.
 
     keys: the free dotted keys; bounds (low, high) and start value of each; residual, loss,
-    starts as in the file.
+    starts, method, global_options (popsize, maxiter, seed), workers as in the file.
     """
 
     mapping: Mapping[str, Any]
@@ -74,13 +86,24 @@ class FitSpec:
     residual: str = 'trajectory'
     loss: str = 'linear'
     starts: int = 1
+    method: str = 'local'
+    global_options: tuple[tuple[str, int], ...] = tuple(GLOBAL_DEFAULTS.items())
+    workers: int = 1
 
     def scenario_mapping(self, values: Any) -> dict[str, Any]:
         """Return the scenario mapping with the free keys set to ``values``."""
         mapping = dict(self.mapping)
         for key, value in zip(self.keys, values):
-            mapping = set_scenario_key(mapping, key, float(value))
+            mapping = set_scenario_key(mapping, scenario_key(key), float(value))
         return mapping
+
+
+def scenario_key(key: str) -> str:
+    """Return the dotted scenario key of a free key (``rotation.2.omega`` -> ``rotation.2.1``)."""
+    parts = key.split('.')
+    if len(parts) == 3 and parts[0] == 'rotation' and parts[2] in KNOT_PARTS:
+        parts[2] = KNOT_PARTS[parts[2]]
+    return '.'.join(parts)
 
 
 def _lookup(mapping: Mapping[str, Any], key: str) -> Any:
@@ -162,7 +185,7 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
         low, high = float(limits[0]), float(limits[1])
         if not low < high:
             raise ScenarioError(f'free.{key}: the range [{low:g}, {high:g}] is empty')
-        value = _lookup(mapping, key)
+        value = _lookup(mapping, scenario_key(key))
         if value is None:
             value = defaults.get(key)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -170,7 +193,8 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
                                 'parameter file')
         for probe in (low, high):
             try:
-                scenario_from_mapping(set_scenario_key(mapping, key, probe), scenario_dir)
+                scenario_from_mapping(set_scenario_key(mapping, scenario_key(key), probe),
+                                      scenario_dir)
             except ConeFeederError as exc:
                 raise ScenarioError(f'free.{key} = {probe:g}: {exc}') from None
         keys.append(key)
@@ -185,9 +209,30 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     starts = content.get('starts', 1)
     if isinstance(starts, bool) or not isinstance(starts, int) or not 1 <= starts <= 100:
         raise ScenarioError(f'starts must be an integer in [1, 100], got {starts!r}')
+    method = content.get('method', 'local')
+    if method not in METHODS:
+        raise ScenarioError(f'method must be one of {", ".join(METHODS)}, got {method!r}')
+    options = content.get('global') or {}
+    if not isinstance(options, Mapping):
+        raise ScenarioError(f'global must be a mapping with the keys '
+                            f'{", ".join(GLOBAL_DEFAULTS)}, got {options!r}')
+    unknown = sorted(str(k) for k in set(options) - set(GLOBAL_DEFAULTS))
+    if unknown:
+        raise ScenarioError(f'unknown global key(s) {", ".join(map(repr, unknown))}; known: '
+                            f'{", ".join(GLOBAL_DEFAULTS)}')
+    merged = {**GLOBAL_DEFAULTS, **options}
+    for key, value in merged.items():
+        low = 0 if key == 'seed' else 1
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise ScenarioError(f'global.{key} must be an integer >= {low}, got {value!r}')
+    workers = content.get('workers', 1)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
+        raise ScenarioError(f'workers must be 0 (one per core) or a positive integer, got '
+                            f'{workers!r}')
     return FitSpec(mapping=mapping, base_dir=scenario_dir, tracks=tracks, keys=tuple(keys),
                    bounds=tuple(bounds), start=tuple(start), residual=residual, loss=loss,
-                   starts=starts)
+                   starts=starts, method=method, global_options=tuple(merged.items()),
+                   workers=workers)
 
 
 def load_fit(path: str | Path) -> FitSpec:
