@@ -48,6 +48,7 @@ from ..errors import ConeFeederError, ScenarioError
 from ..formats.parameter_file import read_yaml
 from ..formats.runlog import model_parameter_values
 from ..formats.scenario_file import scenario_from_mapping, set_scenario_key
+from ..physics.params import check_section
 from ..physics.simulation import cone_surface_height
 
 __all__ = ['FitSpec', 'fit_from_mapping', 'load_fit', 'LOSSES', 'RESIDUALS']
@@ -118,14 +119,16 @@ def _lookup(mapping: Mapping[str, Any], key: str) -> Any:
     return node
 
 
+def _section(section: str, content: Any, keys: tuple[str, ...]) -> Mapping[str, Any]:
+    try:
+        return check_section(section, content, keys)
+    except ConeFeederError as exc:
+        raise ScenarioError(str(exc)) from None
+
+
 def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     """Validate a parsed fit file; raise ScenarioError naming the key."""
-    if not isinstance(content, Mapping):
-        raise ScenarioError(f'a fit must be a mapping with the keys {", ".join(FIT_KEYS)}')
-    unknown = sorted(str(k) for k in set(content) - set(FIT_KEYS))
-    if unknown:
-        raise ScenarioError(f'unknown fit key(s) {", ".join(map(repr, unknown))}; known: '
-                            f'{", ".join(FIT_KEYS)}')
+    _section('fit', content, FIT_KEYS)
     for key in ('scenario', 'tracks', 'free'):
         if key not in content:
             raise ScenarioError(f'the fit is missing the key {key!r}')
@@ -212,15 +215,8 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     method = content.get('method', 'local')
     if method not in METHODS:
         raise ScenarioError(f'method must be one of {", ".join(METHODS)}, got {method!r}')
-    options = content.get('global') or {}
-    if not isinstance(options, Mapping):
-        raise ScenarioError(f'global must be a mapping with the keys '
-                            f'{", ".join(GLOBAL_DEFAULTS)}, got {options!r}')
-    unknown = sorted(str(k) for k in set(options) - set(GLOBAL_DEFAULTS))
-    if unknown:
-        raise ScenarioError(f'unknown global key(s) {", ".join(map(repr, unknown))}; known: '
-                            f'{", ".join(GLOBAL_DEFAULTS)}')
-    merged = {**GLOBAL_DEFAULTS, **options}
+    merged = {**GLOBAL_DEFAULTS,
+              **_section('global', content.get('global') or {}, tuple(GLOBAL_DEFAULTS))}
     for key, value in merged.items():
         low = 0 if key == 'seed' else 1
         if isinstance(value, bool) or not isinstance(value, int) or value < low:

@@ -307,10 +307,8 @@ def load_env_config(source: str | Path | Mapping[str, Any] | None = None,
 
 
 def _check_top(content: Any, where: str) -> None:
-    if not isinstance(content, Mapping):
-        raise EnvConfigError(f'{where} must be a mapping with the keys {", ".join(ENV_KEYS)}, '
-                             f'got {content!r}')
-    unknown = sorted(str(k) for k in set(content) - set(ENV_KEYS))
-    if unknown:
-        raise EnvConfigError(f'unknown key(s) {", ".join(map(repr, unknown))} in {where}; '
-                             f'known: {", ".join(ENV_KEYS)}')
+    """Refuse a configuration (from ``where``) that is no mapping or has unknown keys."""
+    try:
+        check_section('configuration', content, ENV_KEYS)
+    except ConeFeederError as exc:
+        raise EnvConfigError(f'{where}: {exc}') from None

@@ -47,7 +47,7 @@ def test_a_file_with_some_keys(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize('overrides, fragment', [
-    ({'episode_tme': 1.0}, "unknown key(s) 'episode_tme'"),
+    ({'episode_tme': 1.0}, "unknown configuration key(s) 'episode_tme'"),
     ({'feed': {'speed': 1.0}}, "unknown feed key(s) 'speed'"),
     ({'reward': {'pack': 1.0}}, "unknown reward key(s) 'pack'"),
     ({'grid': {'rings': 3}}, "unknown grid key(s) 'rings'"),
