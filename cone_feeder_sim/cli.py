@@ -312,8 +312,11 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
         err.write(f'{key} = {estimate:.6g} +- {stderr:.3g}\n')
     for warning in result.warnings:
         err.write(f'warning: {warning}\n')
-    err.write(f'{result.simulations} simulations in {time.perf_counter() - start:.1f} s, cost '
-              f'{result.cost:.3g} m^2; result written to {args.out}\n')
+    windows = (f' and {result.window_simulations} window simulations'
+               if result.window_simulations else '')
+    err.write(f'{result.simulations} simulations{windows} in '
+              f'{time.perf_counter() - start:.1f} s, cost {result.cost:.3g} m^2; result '
+              f'written to {args.out}\n')
     if args.report:
         from .fit.figure import draw_fit
         draw_fit(problem, result, args.report)

@@ -32,7 +32,7 @@ from ..feeder.scenario import Scenario
 from ..formats.scenario_file import scenario_from_mapping
 from ..physics.simulation import SimParams, Simulator
 
-__all__ = ['FitProblem', 'predict']
+__all__ = ['FitProblem', 'predict', 'trace']
 
 
 def predict(scenario: Scenario, tracks: Tracks) -> np.ndarray:
@@ -41,23 +41,42 @@ def predict(scenario: Scenario, tracks: Tracks) -> np.ndarray:
     for spec in scenario.particles:
         sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
                 [spec.product])
-    last = np.array([spec.position for spec in scenario.particles], dtype=float)
-    out = np.empty((len(tracks), 3))
-    times, first = np.unique(tracks.t, return_index=True)
-    bounds = list(first) + [len(tracks)]
-    for k, t in enumerate(times):
-        if t > sim.t:
-            step = sim.advance_to(float(t))
+    start = np.array([spec.position for spec in scenario.particles], dtype=float)
+    return trace(sim, start, tracks.particle, tracks.t)[0]
+
+
+def trace(sim: Simulator, start: np.ndarray, particle: np.ndarray, t: np.ndarray,
+          last: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Advance ``sim`` through the times ``t`` (M,) (s, sorted); return the positions (M, 3).
+
+    Row i is where the piece whose id is ``particle[i]`` is at ``t[i]`` (m, world frame): a
+    piece that left the cone stays where it left, a piece whose integration failed where it
+    was last. start (ids, 3) (m): where each id is before the first step. With ``last`` (s),
+    the simulation then goes on to that time. Also returns where each id is at the end
+    (ids, 3) (m).
+    """
+    where = np.array(start, dtype=float)
+    out = np.empty((len(t), 3))
+    times, first = np.unique(t, return_index=True)
+    bounds = list(first) + [len(t)]
+    ends = [*times, last] if last is not None else list(times)
+    for k, moment in enumerate(ends):
+        if moment > sim.t:
+            step = sim.advance_to(float(moment))
             if len(step.exits):
-                last[step.exits.ids] = step.exits.position
+                where[step.exits.ids] = step.exits.position
             for failure in step.failures:
                 if np.all(np.isfinite(failure.position)):
-                    last[failure.particle_id] = failure.position
-        if sim.state.count:
-            last[sim.state.ids] = sim.world()[0]
-        rows = slice(bounds[k], bounds[k + 1])
-        out[rows] = last[tracks.particle[rows]]
-    return out
+                    where[failure.particle_id] = failure.position
+        if k < len(times):
+            if sim.state.count:
+                where[sim.state.ids] = sim.world()[0]
+            rows = slice(bounds[k], bounds[k + 1])
+            out[rows] = where[particle[rows]]
+    if sim.state.count:
+        where[sim.state.ids] = sim.world()[0]
+    return out, where
 
 
 class FitProblem:
@@ -67,6 +86,7 @@ class FitProblem:
         """Keep the fit; no simulation runs yet."""
         self.spec = spec
         self.simulations = 0
+        self.window_simulations = 0  # multiple shooting's windows (:mod:`shooting`)
         self._lock = threading.Lock()
         self._columns = 3 if spec.tracks.has_z else 2
 

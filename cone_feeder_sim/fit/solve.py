@@ -41,7 +41,9 @@ from typing import Any
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
+from .jacobian import forward_jacobian, forward_steps, Mapper
 from .problem import FitProblem
+from .shooting import initial_starts, Shooting, split
 
 __all__ = ['CONDITION_LIMIT', 'CORRELATION_LIMIT', 'fit', 'FitResult']
 
@@ -64,8 +66,9 @@ class FitResult:
     """
     The fit: keys, estimates, standard errors, 95 % intervals, correlation, cost, warnings.
 
-    cost: half the sum of squared residuals (m²) at the optimum; simulations: how many were
-    run; piece_rms (m) per tracked piece; success and message from least_squares.
+    cost: half the sum of squared residuals (m²) at the optimum; simulations: how many runs
+    of the whole tracked time; window_simulations: how many runs of one window (multiple
+    shooting); piece_rms (m) per tracked piece; success and message from least_squares.
     """
 
     keys: tuple[str, ...]
@@ -77,6 +80,7 @@ class FitResult:
     cost: float
     simulations: int
     piece_rms: dict[int, float]
+    window_simulations: int = 0
     warnings: list[str] = field(default_factory=list)
     success: bool = True
     message: str = ''
@@ -93,6 +97,7 @@ class FitResult:
                             for i, a in enumerate(self.keys)},
             'cost': float(self.cost),
             'simulations': int(self.simulations),
+            'window_simulations': int(self.window_simulations),
             'piece_rms': {int(p): float(v) for p, v in self.piece_rms.items()},
             'warnings': list(self.warnings),
             'success': bool(self.success),
@@ -115,24 +120,64 @@ def fit(problem: FitProblem) -> FitResult:
     def theta_of(p: np.ndarray) -> np.ndarray:
         return np.where(logs, np.log(np.where(logs, p, 1.0)), p)
 
-    starts = [np.clip(theta_of(np.array(spec.start)), lb, ub)]
-    if spec.method == 'global':
-        starts = [_global_search(problem, values, lb, ub)]
-    rng = np.random.default_rng(STARTS_SEED)
-    starts += [rng.uniform(lb, ub) for _ in range(spec.starts - 1)]
-    best = None
-    for theta0 in starts:
-        result = least_squares(lambda theta: problem.residuals(values(theta)), theta0,
-                               bounds=(lb, ub), loss=spec.loss, diff_step=DIFF_STEP,
-                               x_scale='jac')
-        if best is None or result.cost < best.cost:
-            best = result
+    workers = spec.workers or os.cpu_count() or 1
+    with ThreadPoolExecutor(workers) as pool:
+        mapper = pool.map if workers > 1 else map
+        starts = [np.clip(theta_of(np.array(spec.start)), lb, ub)]
+        if spec.method == 'global':
+            starts = [_global_search(problem, values, lb, ub, mapper)]
+        if spec.segments is not None:
+            starts = [_multiple_shooting(problem, values, starts[0], lb, ub, mapper)]
+        rng = np.random.default_rng(STARTS_SEED)
+        starts += [rng.uniform(lb, ub) for _ in range(spec.starts - 1)]
+        last: dict[bytes, np.ndarray] = {}
+
+        def residuals(theta: np.ndarray) -> np.ndarray:
+            key = theta.tobytes()
+            if key not in last:
+                last.clear()
+                last[key] = problem.residuals(values(theta))
+            return last[key]
+
+        def jacobian(theta: np.ndarray) -> np.ndarray:
+            steps = forward_steps(theta, DIFF_STEP, lb, ub)
+            return forward_jacobian(lambda x: problem.residuals(values(x)), theta,
+                                    residuals(theta), steps, mapper)
+
+        best = None
+        for theta0 in starts:
+            result = least_squares(residuals, theta0, jac=jacobian, bounds=(lb, ub),
+                                   loss=spec.loss, x_scale='jac')
+            if best is None or result.cost < best.cost:
+                best = result
     assert best is not None
     return _statistics(problem, best, values(best.x), logs)
 
 
-def _global_search(problem: FitProblem, values: Any, lb: np.ndarray,
-                   ub: np.ndarray) -> np.ndarray:
+def _multiple_shooting(problem: FitProblem, values: Any, theta0: np.ndarray, lb: np.ndarray,
+                       ub: np.ndarray, mapper: Mapper) -> np.ndarray:
+    """Return θ from a multiple-shooting fit started at θ0 (:mod:`shooting`)."""
+    spec = problem.spec
+    assert spec.segments is not None
+    windows = split(spec.tracks, len(problem.scenario(values(theta0)).particles),
+                    spec.segments)
+    shooting = Shooting(spec, windows, problem.scenario, values, mapper)
+    z0 = np.concatenate([theta0, *(block.reshape(-1)
+                                   for block in initial_starts(spec.tracks, windows,
+                                                               problem.scenario(values(theta0))))])
+    n = len(theta0)
+    free = np.full(len(z0) - n, np.inf)
+    result = least_squares(
+        shooting.residuals, z0,
+        jac=lambda z: shooting.jacobian(z, forward_steps(z[:n], DIFF_STEP, lb, ub)),
+        bounds=(np.concatenate([lb, -free]), np.concatenate([ub, free])), loss=spec.loss,
+        x_scale='jac')
+    problem.window_simulations += shooting.simulations
+    return np.clip(result.x[:n], lb, ub)
+
+
+def _global_search(problem: FitProblem, values: Any, lb: np.ndarray, ub: np.ndarray,
+                   mapper: Mapper) -> np.ndarray:
     """Return the best θ of a differential evolution over the box [lb, ub]."""
     options = dict(problem.spec.global_options)
 
@@ -140,12 +185,9 @@ def _global_search(problem: FitProblem, values: Any, lb: np.ndarray,
         residuals = problem.residuals(values(theta))
         return float(residuals @ residuals)
 
-    workers = problem.spec.workers or os.cpu_count() or 1
-    with ThreadPoolExecutor(workers) as pool:
-        result = differential_evolution(
-            cost, list(zip(lb, ub)), popsize=options['popsize'], maxiter=options['maxiter'],
-            seed=options['seed'], polish=False, updating='deferred', workers=pool.map,
-            tol=1e-8)
+    result = differential_evolution(
+        cost, list(zip(lb, ub)), popsize=options['popsize'], maxiter=options['maxiter'],
+        seed=options['seed'], polish=False, updating='deferred', workers=mapper, tol=1e-8)
     return np.asarray(result.x)
 
 
@@ -198,5 +240,6 @@ def _statistics(problem: FitProblem, result: Any, estimate: np.ndarray,
     return FitResult(keys=keys, estimate=estimate, stderr=stderr, low=low, high=high,
                      correlation=correlation, cost=float(result.cost),
                      simulations=problem.simulations, piece_rms=problem.piece_rms(estimate),
+                     window_simulations=problem.window_simulations,
                      warnings=warnings, success=bool(result.success),
                      message=str(result.message))

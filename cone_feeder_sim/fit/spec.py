@@ -25,11 +25,12 @@ A fit file is a YAML mapping::
       model.d: [10.0, 1000.0]
       model.mu_C: [0.3, 0.98]
     residual: trajectory     # positions at the tracked times
+    segments: 0.5            # optional: multiple shooting over windows of 0.5 s first
     loss: linear             # or soft_l1, huber, cauchy, arctan (scipy's robust losses)
     starts: 1                # > 1: also from starts - 1 points drawn in the bounds (seeded)
     method: local            # or global: differential evolution over the bounds, then local
     global: {popsize: 8, maxiter: 15, seed: 0}   # the differential evolution (method: global)
-    workers: 1               # threads that run the simulations of one generation (0: cores)
+    workers: 0               # threads that run a fit's simulations side by side (0: cores)
 
 Paths are relative to the fit file. Each free key starts from its value in the scenario, or
 for ``model.<key>`` from the parameter file's. The knots of the rotation history are free
@@ -53,8 +54,8 @@ from ..physics.simulation import cone_surface_height
 
 __all__ = ['FitSpec', 'fit_from_mapping', 'load_fit', 'LOSSES', 'RESIDUALS']
 
-FIT_KEYS = ('scenario', 'tracks', 'tracks_every', 'free', 'residual', 'loss', 'starts',
-            'method', 'global', 'workers')
+FIT_KEYS = ('scenario', 'tracks', 'tracks_every', 'free', 'residual', 'segments', 'loss',
+            'starts', 'method', 'global', 'workers')
 #: The searches: least squares from the start values, or differential evolution first.
 METHODS = ('local', 'global')
 #: The keys of ``global:`` and their defaults.
@@ -85,11 +86,12 @@ class FitSpec:
     bounds: tuple[tuple[float, float], ...]
     start: tuple[float, ...]
     residual: str = 'trajectory'
+    segments: float | None = None
     loss: str = 'linear'
     starts: int = 1
     method: str = 'local'
     global_options: tuple[tuple[str, int], ...] = tuple(GLOBAL_DEFAULTS.items())
-    workers: int = 1
+    workers: int = 0
 
     def scenario_mapping(self, values: Any) -> dict[str, Any]:
         """Return the scenario mapping with the free keys set to ``values``."""
@@ -206,6 +208,14 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     residual = content.get('residual', 'trajectory')
     if residual not in RESIDUALS:
         raise ScenarioError(f'residual must be one of {", ".join(RESIDUALS)}, got {residual!r}')
+    segments = content.get('segments')
+    if segments is not None:
+        if (isinstance(segments, bool) or not isinstance(segments, (int, float))
+                or not 0.0 < segments < float(tracks.t.max())):
+            raise ScenarioError(f'segments must be a window length in s, above 0 and below '
+                                f'the last tracked time {float(tracks.t.max()):g} s, got '
+                                f'{segments!r}')
+        segments = float(segments)
     loss = content.get('loss', 'linear')
     if loss not in LOSSES:
         raise ScenarioError(f'loss must be one of {", ".join(LOSSES)}, got {loss!r}')
@@ -221,12 +231,13 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
         low = 0 if key == 'seed' else 1
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ScenarioError(f'global.{key} must be an integer >= {low}, got {value!r}')
-    workers = content.get('workers', 1)
+    workers = content.get('workers', 0)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
         raise ScenarioError(f'workers must be 0 (one per core) or a positive integer, got '
                             f'{workers!r}')
     return FitSpec(mapping=mapping, base_dir=scenario_dir, tracks=tracks, keys=tuple(keys),
-                   bounds=tuple(bounds), start=tuple(start), residual=residual, loss=loss,
+                   bounds=tuple(bounds), start=tuple(start), residual=residual,
+                   segments=segments, loss=loss,
                    starts=starts, method=method, global_options=tuple(merged.items()),
                    workers=workers)
 
