@@ -16,20 +16,30 @@
 Benchmark: a 2-parameter trajectory fit on 5 pieces x 3 s of tracks (issue 21's target: 60 s).
 
 The tracks are simulated with d and mu_C 40 % and 15 % away from the parameter file's
-values, sampled at 30 frames/s with 1 mm of noise, and fitted from the parameter file's
-values (model.d in [10, 1000], model.mu_C in [0.3, 0.98]). Prints the wall time, the number
-of simulations and the share of the time spent simulating, after the calibration line::
+values, sampled at 30 frames/s with 1 mm of noise until each piece leaves the cone. Six
+fits side by side, after the calibration line:
+
+- single shooting from the parameter file's values on 1 thread, then on one per core;
+- from d = 1000, mu_C = 0.35, where single shooting stops in another valley: single
+  shooting, then multiple shooting (``segments: 0.25``), on 1 thread and on one per core.
+
+Each prints the estimates, the wall time, the simulations (whole runs and windows) and the
+time spent simulating, summed over the threads::
 
     .venv/bin/python benchmarks/bench_fit.py
 """
 
 import csv
+import os
 from pathlib import Path
 import tempfile
+import threading
 import time
+from typing import Any
 
 from calibration import calibration_line
 from cone_feeder_sim.fit import problem as problem_module
+from cone_feeder_sim.fit import shooting as shooting_module
 from cone_feeder_sim.fit.problem import FitProblem, predict
 from cone_feeder_sim.fit.solve import fit
 from cone_feeder_sim.fit.spec import fit_from_mapping
@@ -42,44 +52,85 @@ BASE = {'duration': 3.0, 'rotation': [[0.0, 0.0], [0.5, -8.0], [1.5, -8.0], [2.0
         'particles': [{'position': p, 'on_surface': True} for p in (
             [0.11, -0.01, 0.0], [-0.10, -0.01, 0.0], [0.08, -0.13, 0.0], [-0.07, 0.04, 0.0],
             [0.14, 0.06, 0.0])]}
+FREE = {'model.d': [10.0, 1000.0], 'model.mu_C': [0.3, 0.98]}
 
 
-def main() -> None:
-    """Make the tracks, fit, print the figures."""
-    print(calibration_line())
-    warm_up()
+class Stopwatch:
+    """Sum the time spent in wrapped functions over all threads (s)."""
+
+    def __init__(self) -> None:
+        """Start at zero."""
+        self.total = 0.0
+        self._lock = threading.Lock()
+
+    def wrap(self, function: Any) -> Any:
+        """Return ``function`` timed."""
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            start = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                with self._lock:
+                    self.total += time.perf_counter() - start
+        return timed
+
+
+def write_tracks(folder: Path) -> None:
+    """Write noisy tracks of the truth, each piece until it leaves the cone."""
     truth = set_scenario_key(set_scenario_key(BASE, 'model.d', 315.0), 'model.mu_C', 0.7225)
+    scenario = scenario_from_mapping(truth)
     times = np.arange(0.0, 3.0, 1.0 / 30.0)
     particle = np.tile(np.arange(5), len(times))
     t = np.repeat(times, 5)
-    seen = predict(scenario_from_mapping(truth), Tracks(particle, t, np.zeros((len(t), 3))))
-    seen += np.random.default_rng(0).normal(0.0, 0.001, seen.shape)
-    with tempfile.TemporaryDirectory() as folder:
-        with (Path(folder) / 'tracks.csv').open('w', newline='') as stream:
-            writer = csv.writer(stream)
-            writer.writerow(['particle', 't', 'x', 'y'])
-            writer.writerows((p, s, x, y) for p, s, (x, y, _) in zip(particle, t, seen))
-        spec = fit_from_mapping({'scenario': BASE, 'tracks': 'tracks.csv', 'free': {
-            'model.d': [10.0, 1000.0], 'model.mu_C': [0.3, 0.98]}}, Path(folder))
-    simulating = [0.0]
-    original = problem_module.predict
+    seen = predict(scenario, Tracks(particle, t, np.zeros((len(t), 3))))
+    keep = np.hypot(seen[:, 0], seen[:, 1]) < scenario.model.r - 1e-6
+    seen += np.random.default_rng(5).normal(0.0, 0.001, seen.shape)
+    with (folder / 'tracks.csv').open('w', newline='') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(['particle', 't', 'x', 'y'])
+        writer.writerows((p, s, x, y) for p, s, (x, y, _) in zip(
+            particle[keep], t[keep], seen[keep]))
 
-    def timed(*args, **kwargs):
+
+def run(label: str, content: dict, folder: Path) -> None:
+    """Fit once and print the figures."""
+    watch = Stopwatch()
+    originals = problem_module.predict, shooting_module.trace
+    problem_module.predict = watch.wrap(originals[0])
+    shooting_module.trace = watch.wrap(originals[1])
+    try:
+        problem = FitProblem(fit_from_mapping(content, folder))
         start = time.perf_counter()
-        try:
-            return original(*args, **kwargs)
-        finally:
-            simulating[0] += time.perf_counter() - start
+        result = fit(problem)
+        wall = time.perf_counter() - start
+    finally:
+        problem_module.predict, shooting_module.trace = originals
+    estimates = ', '.join(f'{key} = {estimate:.5g} +- {stderr:.2g}' for key, estimate, stderr
+                          in zip(result.keys, result.estimate, result.stderr))
+    threads = content.get('workers', 1) or os.cpu_count() or 1
+    print(f'{label}: {estimates}\n    wall time {wall:.2f} s, {result.simulations} '
+          f'simulations and {result.window_simulations} windows, {watch.total:.2f} s '
+          f'simulating over {threads} thread(s) ({100 * watch.total / wall:.0f} % of the wall '
+          'time)')
 
-    problem_module.predict = timed
-    start = time.perf_counter()
-    result = fit(FitProblem(spec))
-    wall = time.perf_counter() - start
-    problem_module.predict = original
-    for key, estimate, stderr in zip(result.keys, result.estimate, result.stderr):
-        print(f'{key} = {estimate:.6g} +- {stderr:.3g}')
-    print(f'wall time {wall:.2f} s, {result.simulations} simulations, '
-          f'{100 * simulating[0] / wall:.0f} % of the time simulating')
+
+def main() -> None:
+    """Make the tracks, fit three ways, print the figures."""
+    print(calibration_line())
+    warm_up()
+    with tempfile.TemporaryDirectory() as name:
+        folder = Path(name)
+        write_tracks(folder)
+        plain = {'scenario': BASE, 'tracks': 'tracks.csv', 'free': FREE}
+        run('single shooting, 1 thread', plain, folder)
+        run('single shooting, a thread per core', {**plain, 'workers': 0}, folder)
+        far = {**plain, 'scenario': set_scenario_key(set_scenario_key(
+            BASE, 'model.d', 1000.0), 'model.mu_C', 0.35)}
+        for workers in (1, 0):
+            run(f'from d = 1000, mu_C = 0.35: single shooting, workers {workers}',
+                {**far, 'workers': workers}, folder)
+            run(f'from d = 1000, mu_C = 0.35: multiple shooting, segments 0.25, workers '
+                f'{workers}', {**far, 'segments': 0.25, 'workers': workers}, folder)
     print(calibration_line())
 
 

@@ -16,7 +16,8 @@
 The report of a fit (PNG, matplotlib's Agg canvas, no display).
 
 Left: the tracks (dots) and the fitted simulation (lines) seen from above, one colour per
-piece, with the cone's rim. Right: each piece's residual distance (mm) over time.
+piece, with the cone's rim. Right: each piece's residual distance (mm) over time. With
+``residual: exits``: the observed and fitted exit angles (left) and times (right) per piece.
 """
 
 from pathlib import Path
@@ -25,6 +26,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 import numpy as np
 
+from .exits import simulate_exits
 from .problem import FitProblem, predict
 from .solve import FitResult
 from ..errors import ReportError
@@ -33,13 +35,50 @@ __all__ = ['draw_fit']
 
 
 def draw_fit(problem: FitProblem, result: FitResult, path: str | Path) -> None:
-    """Draw the tracks against the fitted simulation and the residuals into ``path``."""
-    spec = problem.spec
-    tracks = spec.tracks
-    scenario = problem.scenario(result.estimate)
-    fitted = predict(scenario, tracks)
+    """Draw the tracks (or exits) against the fitted simulation into ``path``."""
     figure = Figure(figsize=(11, 5), dpi=100)
     FigureCanvasAgg(figure)
+    if problem.spec.exits is not None:
+        _draw_exits(problem, result, figure)
+    else:
+        _draw_tracks(problem, result, figure)
+    estimates = ', '.join(f'{k} = {e:.4g} +- {s:.2g}' for k, e, s in zip(
+        result.keys, result.estimate, result.stderr))
+    figure.axes[-1].set_title(estimates, fontsize=8)
+    figure.tight_layout()
+    try:
+        figure.savefig(path)
+    except OSError as exc:
+        raise ReportError(f'cannot write the fit report {path}: {exc}') from exc
+
+
+def _draw_exits(problem: FitProblem, result: FitResult, figure: Figure) -> None:
+    """Left: observed and fitted exit angles per piece; right: exit times."""
+    exits = problem.spec.exits
+    assert exits is not None
+    angle, t = simulate_exits(problem.scenario(result.estimate))
+    where, when = figure.subplots(1, 2)
+    where.plot(exits.particle, exits.angle_deg, 'x', markersize=9, label='observed')
+    where.plot(exits.particle, angle[exits.particle], 'o', fillstyle='none', markersize=9,
+               label='fitted simulation')
+    where.set_xlabel('piece')
+    where.set_ylabel('exit angle (deg)')
+    where.set_ylim(0.0, 360.0)
+    where.legend(fontsize=7)
+    known = np.isfinite(exits.t)
+    when.plot(exits.particle[known], exits.t[known], 'x', markersize=9, label='observed')
+    when.plot(exits.particle, t[exits.particle], 'o', fillstyle='none', markersize=9,
+              label='fitted simulation (end: stayed)')
+    when.set_xlabel('piece')
+    when.set_ylabel('exit time (s)')
+    when.legend(fontsize=7)
+
+
+def _draw_tracks(problem: FitProblem, result: FitResult, figure: Figure) -> None:
+    """Left: tracks and the fitted simulation from above; right: residuals over time."""
+    tracks = problem.spec.tracks
+    scenario = problem.scenario(result.estimate)
+    fitted = predict(scenario, tracks)
     top, residual = figure.subplots(1, 2)
     rim = np.linspace(0.0, 2.0 * np.pi, 200)
     top.plot(scenario.model.r * np.cos(rim), scenario.model.r * np.sin(rim), color='grey',
@@ -59,11 +98,3 @@ def draw_fit(problem: FitProblem, result: FitResult, path: str | Path) -> None:
     top.legend(fontsize=7, loc='upper right')
     residual.set_xlabel('t (s)')
     residual.set_ylabel('distance fitted - tracked (mm)')
-    estimates = ', '.join(f'{k} = {e:.4g} +- {s:.2g}' for k, e, s in zip(
-        result.keys, result.estimate, result.stderr))
-    residual.set_title(estimates, fontsize=8)
-    figure.tight_layout()
-    try:
-        figure.savefig(path)
-    except OSError as exc:
-        raise ReportError(f'cannot write the fit report {path}: {exc}') from exc

@@ -18,14 +18,16 @@ The residuals of a fit: the scenario simulated with given values, compared with 
 :func:`predict` runs the headless simulator through the tracked times and returns where each
 tracked piece is at each of them (a piece that left the cone stays where it left, a piece
 whose integration failed where it was last). :class:`FitProblem` maps a parameter vector to
-the residual vector (m): predicted minus tracked x and y (and z where tracked), one row per
-observation.
+the residual vector: predicted minus tracked x and y (m, and z where tracked), one row per
+observation; or, with ``residual: exits``, the exit angles' and times' differences in units
+of their sigmas (:mod:`exits`).
 """
 
 import threading
 
 import numpy as np
 
+from .exits import simulate_exits, wrap_degrees
 from .spec import FitSpec
 from .tracks import Tracks
 from ..feeder.scenario import Scenario
@@ -95,15 +97,36 @@ class FitProblem:
         return scenario_from_mapping(self.spec.scenario_mapping(values), self.spec.base_dir)
 
     def residuals(self, values: np.ndarray) -> np.ndarray:
-        """Return predicted minus tracked positions (m), (M * 2,) or (M * 3,) with z."""
+        """
+        Return the residual vector.
+
+        Trajectory: predicted minus tracked positions (m), (M * 2,) or (M * 3,) with z.
+        Exits: per observed exit, the angle difference wrapped into [-180, 180) over its
+        sigma, then, where the time is known, the time difference over its sigma (1).
+        """
         with self._lock:  # simulations may run on several threads (a global search)
             self.simulations += 1
+        scenario = self.scenario(values)
+        exits = self.spec.exits
+        if exits is not None:
+            angle, t = simulate_exits(scenario)
+            sigma_angle, sigma_t = self.spec.exit_sigma
+            known = np.isfinite(exits.t)
+            return np.concatenate([
+                wrap_degrees(angle[exits.particle] - exits.angle_deg) / sigma_angle,
+                (t[exits.particle[known]] - exits.t[known]) / sigma_t])
         tracks = self.spec.tracks
-        diff = predict(self.scenario(values), tracks) - tracks.xyz
+        diff = predict(scenario, tracks) - tracks.xyz
         return diff[:, :self._columns].reshape(-1)
 
     def piece_rms(self, values: np.ndarray) -> dict[int, float]:
-        """Return the root mean square residual (m) of each tracked piece."""
+        """Return the root mean square residual of each piece (m; exits: in sigmas)."""
+        exits = self.spec.exits
+        if exits is not None:
+            residuals = self.residuals(values)
+            owner = np.concatenate([exits.particle, exits.particle[np.isfinite(exits.t)]])
+            return {int(p): float(np.sqrt(np.mean(residuals[owner == p] ** 2)))
+                    for p in exits.particle}
         rows = self.residuals(values).reshape(len(self.spec.tracks), self._columns)
         return {int(p): float(np.sqrt(np.mean(rows[self.spec.tracks.particle == p] ** 2)))
                 for p in np.unique(self.spec.tracks.particle)}

@@ -24,13 +24,15 @@ A fit file is a YAML mapping::
     free:                    # dotted scenario keys -> [low, high]
       model.d: [10.0, 1000.0]
       model.mu_C: [0.3, 0.98]
-    residual: trajectory     # positions at the tracked times
+    residual: trajectory     # positions at the tracked times, or exits: where and when the
+                             # pieces left (tracks: a CSV particle, angle_deg[, t])
+    exit_sigma: {angle_deg: 1.0, t: 0.02}   # exits: the uncertainty of an angle and a time
     segments: 0.5            # optional: multiple shooting over windows of 0.5 s first
     loss: linear             # or soft_l1, huber, cauchy, arctan (scipy's robust losses)
     starts: 1                # > 1: also from starts - 1 points drawn in the bounds (seeded)
     method: local            # or global: differential evolution over the bounds, then local
     global: {popsize: 8, maxiter: 15, seed: 0}   # the differential evolution (method: global)
-    workers: 0               # threads that run a fit's simulations side by side (0: cores)
+    workers: 1               # threads that run a fit's simulations side by side (0: cores)
 
 Paths are relative to the fit file. Each free key starts from its value in the scenario, or
 for ``model.<key>`` from the parameter file's. The knots of the rotation history are free
@@ -44,8 +46,12 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from .exits import Exits, read_exits_csv
 from .tracks import read_tracks, Tracks
 from ..errors import ConeFeederError, ScenarioError
+from ..feeder.scenario import Scenario
 from ..formats.parameter_file import read_yaml
 from ..formats.runlog import model_parameter_values
 from ..formats.scenario_file import scenario_from_mapping, set_scenario_key
@@ -54,16 +60,18 @@ from ..physics.simulation import cone_surface_height
 
 __all__ = ['FitSpec', 'fit_from_mapping', 'load_fit', 'LOSSES', 'RESIDUALS']
 
-FIT_KEYS = ('scenario', 'tracks', 'tracks_every', 'free', 'residual', 'segments', 'loss',
-            'starts', 'method', 'global', 'workers')
+FIT_KEYS = ('scenario', 'tracks', 'tracks_every', 'free', 'residual', 'exit_sigma', 'segments',
+            'loss', 'starts', 'method', 'global', 'workers')
 #: The searches: least squares from the start values, or differential evolution first.
 METHODS = ('local', 'global')
 #: The keys of ``global:`` and their defaults.
 GLOBAL_DEFAULTS = {'popsize': 8, 'maxiter': 15, 'seed': 0}
 #: Names of a rotation knot's two numbers.
 KNOT_PARTS = {'t': '0', 'omega': '1'}
-#: What the residuals compare (``exits``: later).
-RESIDUALS = ('trajectory',)
+#: What the residuals compare: positions at the tracked times, or exit angles and times.
+RESIDUALS = ('trajectory', 'exits')
+#: The keys of ``exit_sigma:`` and their defaults (deg, s).
+EXIT_SIGMA_DEFAULTS = {'angle_deg': 1.0, 't': 0.02}
 #: scipy.optimize.least_squares' losses.
 LOSSES = ('linear', 'soft_l1', 'huber', 'cauchy', 'arctan')
 #: How far outside the cone's rim (m) a tracked position may be (tracking noise).
@@ -75,8 +83,10 @@ class FitSpec:
     """
     A validated fit: the base scenario mapping and its directory, the tracks, the free keys.
 
-    keys: the free dotted keys; bounds (low, high) and start value of each; residual, loss,
-    starts, method, global_options (popsize, maxiter, seed), workers as in the file.
+    keys: the free dotted keys; bounds (low, high) and start value of each; residual,
+    segments (s, or None: single shooting only), loss, starts, method, global_options
+    (popsize, maxiter, seed), workers as in the file. With ``residual: exits``, exits holds
+    the observed exits, exit_sigma their uncertainty (deg, s), and tracks is empty.
     """
 
     mapping: Mapping[str, Any]
@@ -86,12 +96,14 @@ class FitSpec:
     bounds: tuple[tuple[float, float], ...]
     start: tuple[float, ...]
     residual: str = 'trajectory'
+    exits: Exits | None = None
+    exit_sigma: tuple[float, float] = (1.0, 0.02)
     segments: float | None = None
     loss: str = 'linear'
     starts: int = 1
     method: str = 'local'
     global_options: tuple[tuple[str, int], ...] = tuple(GLOBAL_DEFAULTS.items())
-    workers: int = 0
+    workers: int = 1
 
     def scenario_mapping(self, values: Any) -> dict[str, Any]:
         """Return the scenario mapping with the free keys set to ``values``."""
@@ -151,29 +163,25 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     tracks_path = Path(str(content['tracks']))
     if base_dir is not None and not tracks_path.is_absolute():
         tracks_path = base_dir / tracks_path
-    every = content.get('tracks_every', 1)
-    if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-        raise ScenarioError(f'tracks_every must be a positive integer, got {every!r}')
-    tracks = read_tracks(tracks_path, every)
-    pieces = len(scenario.particles)
-    strangers = sorted(set(tracks.particle.tolist()) - set(range(pieces)))
-    if strangers:
-        raise ScenarioError(f'tracks: particle(s) {", ".join(map(str, strangers))} are not in '
-                            f'the scenario (its particles are 0..{pieces - 1})')
-    rho = (tracks.xyz[:, 0] ** 2 + tracks.xyz[:, 1] ** 2) ** 0.5
-    outside = rho > scenario.model.r + RIM_SLACK
-    if outside.any():
-        i = int(outside.argmax())
-        raise ScenarioError(f'tracks: particle {tracks.particle[i]} at t = {tracks.t[i]:g} s is '
-                            f'{rho[i]:.3f} m from the axis, outside the cone (radius '
-                            f'{scenario.model.r:g} m)')
-    if tracks.has_z:
-        surface = [cone_surface_height(scenario.model, x, y) for x, y, _ in tracks.xyz]
-        if (tracks.xyz[:, 2] < min(surface) - 0.05).any():
-            raise ScenarioError('tracks: a z is more than 5 cm below the cone surface')
-    if tracks.t.min() < 0.0 or tracks.t.max() > scenario.duration:
-        raise ScenarioError(f'tracks: times must lie in [0, duration = {scenario.duration:g} '
-                            f's], got {tracks.t.min():g} .. {tracks.t.max():g} s')
+    residual = content.get('residual', 'trajectory')
+    if residual not in RESIDUALS:
+        raise ScenarioError(f'residual must be one of {", ".join(RESIDUALS)}, got {residual!r}')
+    exits = None
+    if residual == 'exits':
+        exits = read_exits_csv(tracks_path)
+        _check_pieces(exits.particle, len(scenario.particles))
+        known = exits.t[np.isfinite(exits.t)]
+        if len(known) and (known.min() < 0.0 or known.max() > scenario.duration):
+            raise ScenarioError(f'tracks: exit times must lie in [0, duration = '
+                                f'{scenario.duration:g} s], got {known.min():g} .. '
+                                f'{known.max():g} s')
+        tracks = Tracks(np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros((0, 3)))
+    else:
+        every = content.get('tracks_every', 1)
+        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+            raise ScenarioError(f'tracks_every must be a positive integer, got {every!r}')
+        tracks = read_tracks(tracks_path, every)
+        _check_tracks(tracks, scenario)
     free = content['free']
     if not isinstance(free, Mapping) or not free:
         raise ScenarioError('free must be a non-empty mapping of dotted scenario keys to '
@@ -205,10 +213,15 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
         keys.append(key)
         bounds.append((low, high))
         start.append(min(max(float(value), low), high))
-    residual = content.get('residual', 'trajectory')
-    if residual not in RESIDUALS:
-        raise ScenarioError(f'residual must be one of {", ".join(RESIDUALS)}, got {residual!r}')
+    sigma = {**EXIT_SIGMA_DEFAULTS, **_section('exit_sigma', content.get('exit_sigma') or {},
+                                                tuple(EXIT_SIGMA_DEFAULTS))}
+    for key, value in sigma.items():
+        if (isinstance(value, bool) or not isinstance(value, (int, float))
+                or not 0.0 < value < math.inf):
+            raise ScenarioError(f'exit_sigma.{key} must be a positive number, got {value!r}')
     segments = content.get('segments')
+    if segments is not None and residual == 'exits':
+        raise ScenarioError('segments (multiple shooting) needs residual: trajectory')
     if segments is not None:
         if (isinstance(segments, bool) or not isinstance(segments, (int, float))
                 or not 0.0 < segments < float(tracks.t.max())):
@@ -231,15 +244,41 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
         low = 0 if key == 'seed' else 1
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ScenarioError(f'global.{key} must be an integer >= {low}, got {value!r}')
-    workers = content.get('workers', 0)
+    workers = content.get('workers', 1)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
         raise ScenarioError(f'workers must be 0 (one per core) or a positive integer, got '
                             f'{workers!r}')
     return FitSpec(mapping=mapping, base_dir=scenario_dir, tracks=tracks, keys=tuple(keys),
-                   bounds=tuple(bounds), start=tuple(start), residual=residual,
+                   bounds=tuple(bounds), start=tuple(start), residual=residual, exits=exits,
+                   exit_sigma=(float(sigma['angle_deg']), float(sigma['t'])),
                    segments=segments, loss=loss,
                    starts=starts, method=method, global_options=tuple(merged.items()),
                    workers=workers)
+
+
+def _check_pieces(particle: np.ndarray, pieces: int) -> None:
+    strangers = sorted(set(particle.tolist()) - set(range(pieces)))
+    if strangers:
+        raise ScenarioError(f'tracks: particle(s) {", ".join(map(str, strangers))} are not in '
+                            f'the scenario (its particles are 0..{pieces - 1})')
+
+
+def _check_tracks(tracks: Tracks, scenario: Scenario) -> None:
+    _check_pieces(tracks.particle, len(scenario.particles))
+    rho = (tracks.xyz[:, 0] ** 2 + tracks.xyz[:, 1] ** 2) ** 0.5
+    outside = rho > scenario.model.r + RIM_SLACK
+    if outside.any():
+        i = int(outside.argmax())
+        raise ScenarioError(f'tracks: particle {tracks.particle[i]} at t = {tracks.t[i]:g} s is '
+                            f'{rho[i]:.3f} m from the axis, outside the cone (radius '
+                            f'{scenario.model.r:g} m)')
+    if tracks.has_z:
+        surface = [cone_surface_height(scenario.model, x, y) for x, y, _ in tracks.xyz]
+        if (tracks.xyz[:, 2] < min(surface) - 0.05).any():
+            raise ScenarioError('tracks: a z is more than 5 cm below the cone surface')
+    if tracks.t.min() < 0.0 or tracks.t.max() > scenario.duration:
+        raise ScenarioError(f'tracks: times must lie in [0, duration = {scenario.duration:g} '
+                            f's], got {tracks.t.min():g} .. {tracks.t.max():g} s')
 
 
 def load_fit(path: str | Path) -> FitSpec:
