@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-Study: from which starts do single and multiple shooting find the truth?
+Study: the starts from which single and multiple shooting find the truth.
 
 The tracks of bench_fit.py (5 pieces x 3 s, d = 315, mu_C = 0.7225, 30 frames/s, 1 mm of
 noise, each piece until it leaves the cone) are fitted from a grid of 5 x 5 starts in

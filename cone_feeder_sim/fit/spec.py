@@ -213,8 +213,8 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
         keys.append(key)
         bounds.append((low, high))
         start.append(min(max(float(value), low), high))
-    sigma = {**EXIT_SIGMA_DEFAULTS, **_section('exit_sigma', content.get('exit_sigma') or {},
-                                                tuple(EXIT_SIGMA_DEFAULTS))}
+    given = _section('exit_sigma', content.get('exit_sigma') or {}, tuple(EXIT_SIGMA_DEFAULTS))
+    sigma = {**EXIT_SIGMA_DEFAULTS, **given}
     for key, value in sigma.items():
         if (isinstance(value, bool) or not isinstance(value, (int, float))
                 or not 0.0 < value < math.inf):
