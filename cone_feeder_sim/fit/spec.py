@@ -158,7 +158,7 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     if mapping.get('parameters') is not None and scenario_dir is not None:
         parameters = Path(str(mapping['parameters']))
         if not parameters.is_absolute():
-            mapping['parameters'] = str(scenario_dir / parameters)
+            mapping['parameters'] = str((scenario_dir / parameters).resolve())
     scenario = scenario_from_mapping(mapping, scenario_dir)
     tracks_path = Path(str(content['tracks']))
     if base_dir is not None and not tracks_path.is_absolute():

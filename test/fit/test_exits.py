@@ -22,7 +22,7 @@ from cone_feeder_sim.errors import ScenarioError
 from cone_feeder_sim.fit.exits import read_exits_csv, simulate_exits, wrap_degrees
 from cone_feeder_sim.fit.problem import FitProblem
 from cone_feeder_sim.fit.solve import fit
-from cone_feeder_sim.fit.spec import fit_from_mapping
+from cone_feeder_sim.fit.spec import fit_from_mapping, load_fit
 from cone_feeder_sim.formats.scenario_file import scenario_from_mapping, set_scenario_key
 import numpy as np
 import pytest
@@ -94,3 +94,17 @@ def test_bad_exits_are_refused(tmp_path: Path, rows: str, change: dict, fragment
         fit_from_mapping({'scenario': BASE, 'tracks': 'exits.csv', 'residual': 'exits',
                           'free': FREE, **change}, tmp_path)
     assert fragment in str(info.value)
+
+
+def test_a_fit_file_given_by_a_relative_path_finds_the_parameter_file(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    folder = tmp_path / 'config'
+    folder.mkdir()
+    (folder / 'table.yaml').write_text(yaml.safe_dump({'mu_C': 0.8}))
+    (folder / 'base.yaml').write_text(yaml.safe_dump({**BASE, 'parameters': 'table.yaml'}))
+    (folder / 'exits.csv').write_text('particle,angle_deg\n0,10\n')
+    (folder / 'fit.yaml').write_text(yaml.safe_dump({
+        'scenario': 'base.yaml', 'tracks': 'exits.csv', 'residual': 'exits', 'free': FREE}))
+    monkeypatch.chdir(tmp_path)
+    spec = load_fit('config/fit.yaml')
+    assert FitProblem(spec).scenario(np.array(spec.start)).model.product.mu_C == 0.8
