@@ -199,6 +199,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help='where to write the estimates, errors and correlations')
     fit.add_argument('--report', metavar='PNG',
                      help='draw the tracks against the fitted simulation, and the residuals')
+    fit.add_argument('--scheduler', metavar='ADDRESS',
+                     help="run the fit's simulations on a running Dask scheduler "
+                          "(tcp://host:port), the sweep's cluster; default: this process")
     recover = sub.add_parser(
         'recover', help='copy the readable part of an unfinished or damaged MCAP file into a '
                         'complete one (with summary and footer)')
@@ -305,7 +308,18 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
     warm_up()
     start = time.perf_counter()
     problem = FitProblem(spec)
-    result = fit(problem)
+    if args.scheduler is None:
+        result = fit(problem)
+    else:
+        try:
+            from .fit.solve import dask_mapper
+            from .sweep.cluster import dask_client
+        except ImportError as exc:
+            if exc.name not in ('dask', 'distributed'):
+                raise
+            raise ConeFeederError(SWEEP_INSTALL) from None
+        with dask_client(args.scheduler) as client:
+            result = fit(problem, mapper=dask_mapper(client))
     Path(args.out).write_text(yaml.safe_dump(result.as_mapping(), sort_keys=False),
                               encoding='utf-8')
     for key, estimate, stderr in zip(result.keys, result.estimate, result.stderr):

@@ -23,6 +23,7 @@ observation; or, with ``residual: exits``, the exit angles' and times' differenc
 of their sigmas (:mod:`exits`).
 """
 
+from dataclasses import dataclass
 import threading
 
 import numpy as np
@@ -34,7 +35,7 @@ from ..feeder.scenario import Scenario
 from ..formats.scenario_file import scenario_from_mapping
 from ..physics.simulation import SimParams, Simulator
 
-__all__ = ['FitProblem', 'predict', 'trace']
+__all__ = ['FitProblem', 'predict', 'Residuals', 'residuals_of', 'SumOfSquares', 'trace']
 
 
 def predict(scenario: Scenario, tracks: Tracks) -> np.ndarray:
@@ -81,6 +82,60 @@ def trace(sim: Simulator, start: np.ndarray, particle: np.ndarray, t: np.ndarray
     return out, where
 
 
+def residuals_of(spec: FitSpec, values: np.ndarray) -> np.ndarray:
+    """
+    Return the residual vector of the fit ``spec`` at the free values ``values``.
+
+    Trajectory: predicted minus tracked positions (m), (M * 2,) or (M * 3,) with z.
+    Exits: per observed exit, the angle difference wrapped into [-180, 180) over its
+    sigma, then, where the time is known, the time difference over its sigma (1).
+    """
+    scenario = scenario_from_mapping(spec.scenario_mapping(values), spec.base_dir)
+    exits = spec.exits
+    if exits is not None:
+        angle, t = simulate_exits(scenario)
+        sigma_angle, sigma_t = spec.exit_sigma
+        known = np.isfinite(exits.t)
+        return np.concatenate([
+            wrap_degrees(angle[exits.particle] - exits.angle_deg) / sigma_angle,
+            (t[exits.particle[known]] - exits.t[known]) / sigma_t])
+    tracks = spec.tracks
+    diff = predict(scenario, tracks) - tracks.xyz
+    return diff[:, :3 if tracks.has_z else 2].reshape(-1)
+
+
+@dataclass(frozen=True, eq=False)
+class Residuals:
+    """
+    The residuals as a function of θ, picklable: what a thread, a process or a Dask worker runs.
+
+    logs (n,): which free keys are searched in log scale (value = exp θ); the others θ = value.
+    """
+
+    spec: FitSpec
+    logs: tuple[bool, ...]
+
+    def values(self, theta: np.ndarray) -> np.ndarray:
+        """Return the free values at θ."""
+        return np.where(self.logs, np.exp(theta), theta)
+
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        """Return the residual vector at θ."""
+        return residuals_of(self.spec, self.values(theta))
+
+
+@dataclass(frozen=True, eq=False)
+class SumOfSquares:
+    """The sum of squared residuals at θ, picklable (a global search's cost)."""
+
+    residuals: Residuals
+
+    def __call__(self, theta: np.ndarray) -> float:
+        """Return |r(θ)|²."""
+        r = self.residuals(theta)
+        return float(r @ r)
+
+
 class FitProblem:
     """The residuals of a fit as a function of the free values; counts the simulations."""
 
@@ -97,27 +152,14 @@ class FitProblem:
         return scenario_from_mapping(self.spec.scenario_mapping(values), self.spec.base_dir)
 
     def residuals(self, values: np.ndarray) -> np.ndarray:
-        """
-        Return the residual vector.
+        """Return the residual vector at ``values`` (:func:`residuals_of`); count it."""
+        self.count(1)
+        return residuals_of(self.spec, values)
 
-        Trajectory: predicted minus tracked positions (m), (M * 2,) or (M * 3,) with z.
-        Exits: per observed exit, the angle difference wrapped into [-180, 180) over its
-        sigma, then, where the time is known, the time difference over its sigma (1).
-        """
-        with self._lock:  # simulations may run on several threads (a global search)
-            self.simulations += 1
-        scenario = self.scenario(values)
-        exits = self.spec.exits
-        if exits is not None:
-            angle, t = simulate_exits(scenario)
-            sigma_angle, sigma_t = self.spec.exit_sigma
-            known = np.isfinite(exits.t)
-            return np.concatenate([
-                wrap_degrees(angle[exits.particle] - exits.angle_deg) / sigma_angle,
-                (t[exits.particle[known]] - exits.t[known]) / sigma_t])
-        tracks = self.spec.tracks
-        diff = predict(scenario, tracks) - tracks.xyz
-        return diff[:, :self._columns].reshape(-1)
+    def count(self, simulations: int) -> None:
+        """Count simulations run here or elsewhere (threads, processes, Dask workers)."""
+        with self._lock:
+            self.simulations += simulations
 
     def piece_rms(self, values: np.ndarray) -> dict[int, float]:
         """Return the root mean square residual of each piece (m; exits: in sigmas)."""

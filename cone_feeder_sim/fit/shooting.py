@@ -143,53 +143,26 @@ def initial_starts(tracks: Tracks, windows: Windows, scenario: Scenario) -> list
     return starts
 
 
-class Shooting:
+@dataclass(frozen=True, eq=False)
+class WindowRun:
     """
-    The multiple-shooting residuals and their Jacobian over z = (θ, the windows' starts).
+    One window's simulation, picklable: what a thread, a process or a Dask worker runs.
 
-    values: θ -> the free keys' values; scenario: values -> Scenario; gap_weight: the weight
-    of a continuity gap against a track residual.
+    spec: the fit; windows: its windows; columns: 2 (x, y) or 3 (with z) per track row.
     """
 
-    def __init__(self, spec: FitSpec, windows: Windows, scenario: Any, values: Any,
-                 mapper: Mapper = map) -> None:
-        """Keep the fit and its windows; no simulation runs yet."""
-        self.spec = spec
-        self.windows = windows
-        self._scenario = scenario
-        self._values = values
-        self.mapper = mapper
-        self.simulations = 0  # window simulations
-        self.columns = 3 if spec.tracks.has_z else 2
-        self.params = len(spec.keys)
-        self.sizes = [len(p) * UNKNOWNS for p in windows.pieces]
-        self.sizes[0] = 0
-        self.offsets = np.concatenate([[0], np.cumsum(self.sizes)]) + self.params
-        segment = float(np.diff(windows.edges).mean())
-        masses = np.array([piece.product.m for piece in self.spec_scenario.particles])
-        self.gap_scales = [np.array([[1.0, 1.0, segment, segment, w, w]
-                                     for w in segment ** 2 / (2.0 * masses[gap])])
-                           for gap in windows.gaps]
-        self._cache: tuple[bytes, list[tuple[np.ndarray, np.ndarray]]] | None = None
-        data = [len(rows) * self.columns for rows in windows.rows]
-        self._data_offsets = np.concatenate([[0], np.cumsum(data)])
-        gaps = [len(g) * UNKNOWNS for g in windows.gaps]
-        self._gap_offsets = np.concatenate([[0], np.cumsum(gaps)]) + self._data_offsets[-1]
-        self.size = int(self._gap_offsets[-1])
+    spec: FitSpec
+    windows: Windows
+    columns: int
 
-    def starts(self, z: np.ndarray) -> list[np.ndarray]:
-        """Return each window's start unknowns (pieces, 4) in z."""
-        return [z[self.offsets[k]:self.offsets[k + 1]].reshape(-1, UNKNOWNS)
-                for k in range(self.windows.count)]
-
-    def run_window(self, task: tuple[int, Scenario, np.ndarray]) -> tuple[np.ndarray,
-                                                                          np.ndarray]:
+    def __call__(self, task: tuple[int, Scenario, np.ndarray]) -> tuple[np.ndarray,
+                                                                       np.ndarray]:
         """
         Simulate one window; return its rows' residuals (m) and the ends of its pieces.
 
-        task: (k, scenario, start (pieces, 4)). The ends (pieces, 4) are x, y (m) and x',
-        y' (m/s) at the window's end; a piece that left the cone keeps its exit point and
-        the start's velocity.
+        task: (k, scenario, start (pieces, 6)). The ends (pieces, 6) are x, y (m), x', y'
+        (m/s) and P_x, P_y (N) at the window's end; a piece that left the cone keeps its exit
+        point and the start's velocity and force.
         """
         k, scenario, start = task
         windows, tracks = self.windows, self.spec.tracks
@@ -247,6 +220,47 @@ class Shooting:
         return replace(empty, y=y, products=np.array(rows), ids=ids.astype(np.int64),
                        step_size=np.full(len(ids), params.solver.h_init),
                        next_id=len(scenario.particles))
+
+
+class Shooting:
+    """
+    The multiple-shooting residuals and their Jacobian over z = (θ, the windows' starts).
+
+    values: θ -> the free keys' values; scenario: values -> Scenario; gap_weight: the weight
+    of a continuity gap against a track residual.
+    """
+
+    def __init__(self, spec: FitSpec, windows: Windows, scenario: Any, values: Any,
+                 mapper: Mapper = map) -> None:
+        """Keep the fit and its windows; no simulation runs yet."""
+        self.spec = spec
+        self.windows = windows
+        self._scenario = scenario
+        self._values = values
+        self.mapper = mapper
+        self.simulations = 0  # window simulations
+        self.columns = 3 if spec.tracks.has_z else 2
+        self.run_window = WindowRun(spec, windows, self.columns)
+        self.params = len(spec.keys)
+        self.sizes = [len(p) * UNKNOWNS for p in windows.pieces]
+        self.sizes[0] = 0
+        self.offsets = np.concatenate([[0], np.cumsum(self.sizes)]) + self.params
+        segment = float(np.diff(windows.edges).mean())
+        masses = np.array([piece.product.m for piece in self.spec_scenario.particles])
+        self.gap_scales = [np.array([[1.0, 1.0, segment, segment, w, w]
+                                     for w in segment ** 2 / (2.0 * masses[gap])])
+                           for gap in windows.gaps]
+        self._cache: tuple[bytes, list[tuple[np.ndarray, np.ndarray]]] | None = None
+        data = [len(rows) * self.columns for rows in windows.rows]
+        self._data_offsets = np.concatenate([[0], np.cumsum(data)])
+        gaps = [len(g) * UNKNOWNS for g in windows.gaps]
+        self._gap_offsets = np.concatenate([[0], np.cumsum(gaps)]) + self._data_offsets[-1]
+        self.size = int(self._gap_offsets[-1])
+
+    def starts(self, z: np.ndarray) -> list[np.ndarray]:
+        """Return each window's start unknowns (pieces, 4) in z."""
+        return [z[self.offsets[k]:self.offsets[k + 1]].reshape(-1, UNKNOWNS)
+                for k in range(self.windows.count)]
 
     def _evaluate(self, z: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         key = z.tobytes()

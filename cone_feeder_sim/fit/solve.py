@@ -42,10 +42,10 @@ import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
 from .jacobian import forward_jacobian, forward_steps, Mapper
-from .problem import FitProblem
+from .problem import FitProblem, Residuals, SumOfSquares
 from .shooting import initial_starts, Shooting, split
 
-__all__ = ['CONDITION_LIMIT', 'CORRELATION_LIMIT', 'fit', 'FitResult']
+__all__ = ['CONDITION_LIMIT', 'CORRELATION_LIMIT', 'dask_mapper', 'fit', 'FitResult']
 
 #: Above this condition number of the scaled Jacobian the fit warns of a near-singular one.
 CONDITION_LIMIT = 1.0e6
@@ -105,29 +105,39 @@ class FitResult:
         }
 
 
-def fit(problem: FitProblem) -> FitResult:
-    """Fit the problem's free keys; see the module documentation."""
+def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
+    """
+    Fit the problem's free keys; see the module documentation.
+
+    mapper: runs a batch of simulations (a global search's generation, the Jacobian's
+    columns, multiple shooting's windows), for example a Dask client's (:func:`dask_mapper`);
+    by default ``spec.workers`` threads.
+    """
     spec = problem.spec
     bounds = np.array(spec.bounds)
     logs = bounds[:, 0] > 0.0
     column = logs[:, None]
     to_theta = np.where(column, np.log(np.where(column, bounds, 1.0)), bounds)
     lb, ub = to_theta[:, 0], to_theta[:, 1]
-
-    def values(theta: np.ndarray) -> np.ndarray:
-        return np.where(logs, np.exp(theta), theta)
+    task = Residuals(spec, tuple(bool(v) for v in logs))
 
     def theta_of(p: np.ndarray) -> np.ndarray:
         return np.where(logs, np.log(np.where(logs, p, 1.0)), p)
 
     workers = spec.workers or os.cpu_count() or 1
     with ThreadPoolExecutor(workers) as pool:
-        mapper = pool.map if workers > 1 else map
+        batch = mapper or (pool.map if workers > 1 else map)
+
+        def counted(function: Any, items: Any) -> list[Any]:
+            items = list(items)
+            problem.count(len(items))
+            return list(batch(function, items))
+
         starts = [np.clip(theta_of(np.array(spec.start)), lb, ub)]
         if spec.method == 'global':
-            starts = [_global_search(problem, values, lb, ub, mapper)]
+            starts = [_global_search(problem, task, lb, ub, counted)]
         if spec.segments is not None:
-            starts = [_multiple_shooting(problem, values, starts[0], lb, ub, mapper)]
+            starts = [_multiple_shooting(problem, task.values, starts[0], lb, ub, batch)]
         rng = np.random.default_rng(STARTS_SEED)
         starts += [rng.uniform(lb, ub) for _ in range(spec.starts - 1)]
         last: dict[bytes, np.ndarray] = {}
@@ -136,13 +146,12 @@ def fit(problem: FitProblem) -> FitResult:
             key = theta.tobytes()
             if key not in last:
                 last.clear()
-                last[key] = problem.residuals(values(theta))
+                last[key] = problem.residuals(task.values(theta))
             return last[key]
 
         def jacobian(theta: np.ndarray) -> np.ndarray:
             steps = forward_steps(theta, DIFF_STEP, lb, ub)
-            return forward_jacobian(lambda x: problem.residuals(values(x)), theta,
-                                    residuals(theta), steps, mapper)
+            return forward_jacobian(task, theta, residuals(theta), steps, counted)
 
         best = None
         for theta0 in starts:
@@ -151,7 +160,14 @@ def fit(problem: FitProblem) -> FitResult:
             if best is None or result.cost < best.cost:
                 best = result
     assert best is not None
-    return _statistics(problem, best, values(best.x), logs)
+    return _statistics(problem, best, task.values(best.x), logs)
+
+
+def dask_mapper(client: Any) -> Mapper:
+    """Return a map over a Dask client: a batch's simulations on the cluster's workers."""
+    def mapped(function: Any, items: Any) -> list[Any]:
+        return client.gather(client.map(function, list(items), pure=False))
+    return mapped
 
 
 def _multiple_shooting(problem: FitProblem, values: Any, theta0: np.ndarray, lb: np.ndarray,
@@ -176,18 +192,14 @@ def _multiple_shooting(problem: FitProblem, values: Any, theta0: np.ndarray, lb:
     return np.clip(result.x[:n], lb, ub)
 
 
-def _global_search(problem: FitProblem, values: Any, lb: np.ndarray, ub: np.ndarray,
+def _global_search(problem: FitProblem, task: Residuals, lb: np.ndarray, ub: np.ndarray,
                    mapper: Mapper) -> np.ndarray:
     """Return the best θ of a differential evolution over the box [lb, ub]."""
     options = dict(problem.spec.global_options)
-
-    def cost(theta: np.ndarray) -> float:
-        residuals = problem.residuals(values(theta))
-        return float(residuals @ residuals)
-
     result = differential_evolution(
-        cost, list(zip(lb, ub)), popsize=options['popsize'], maxiter=options['maxiter'],
-        seed=options['seed'], polish=False, updating='deferred', workers=mapper, tol=1e-8)
+        SumOfSquares(task), list(zip(lb, ub)), popsize=options['popsize'],
+        maxiter=options['maxiter'], seed=options['seed'], polish=False, updating='deferred',
+        workers=mapper, tol=1e-8)
     return np.asarray(result.x)
 
 
