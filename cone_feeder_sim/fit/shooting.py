@@ -64,6 +64,8 @@ __all__ = ['initial_starts', 'split', 'Shooting', 'Windows']
 UNKNOWNS = 6
 #: Forward-difference steps of the unknowns (m, m, m/s, m/s, N, N).
 STEPS = np.array([1.0e-5, 1.0e-5, 1.0e-4, 1.0e-4, 1.0e-4, 1.0e-4])
+#: A window's simulation: its index k, the scenario and the starts (pieces, 6) of its pieces.
+Task = tuple[int, Scenario, np.ndarray]
 #: Half-width (s) of the observations a start velocity is fitted to.
 SLOPE_SPAN = 0.1
 
@@ -155,8 +157,7 @@ class WindowRun:
     windows: Windows
     columns: int
 
-    def __call__(self, task: tuple[int, Scenario, np.ndarray]) -> tuple[np.ndarray,
-                                                                       np.ndarray]:
+    def __call__(self, task: Task) -> tuple[np.ndarray, np.ndarray]:
         """
         Simulate one window; return its rows' residuals (m) and the ends of its pieces.
 
