@@ -15,8 +15,10 @@
 """
 Parameter identification: fit a scenario's free parameters to tracked pieces.
 
-``tracks`` (tracks of pieces from a CSV file: particle, t, x, y[, z]), ``spec`` (the fit file,
-validated), ``problem`` (the residuals of a parameter vector: a simulation of the scenario
-compared with the tracks) and ``solve`` (bounded least squares with standard errors,
-correlations and identifiability warnings). No ROS; the headless simulator only.
+``tracks`` (tracks of pieces: a CSV of particle, t, x, y[, z], or a recording), ``exits``
+(observed exits and the simulated ones), ``spec`` (the fit file, validated), ``problem`` (the
+residuals of a parameter vector: a simulation of the scenario compared with the data),
+``jacobian`` (forward differences, columns side by side), ``shooting`` (multiple shooting)
+and ``solve`` (global search, bounded least squares with standard errors, correlations and
+identifiability warnings). No ROS; the headless simulator only.
 """
