@@ -25,13 +25,13 @@ has not left by the end counts as leaving at the end, at the angle where it is: 
 penalty that a search can follow.
 """
 
-import csv
 from dataclasses import dataclass
 import math
 from pathlib import Path
 
 import numpy as np
 
+from .tracks import read_table
 from ..errors import ScenarioError
 from ..feeder.scenario import Scenario
 from ..physics.simulation import SimParams, Simulator
@@ -62,30 +62,20 @@ class Exits:
 def read_exits_csv(path: str | Path) -> Exits:
     """Read an exits file; raise ScenarioError naming the file, the line and the column."""
     path = Path(path)
-    try:
-        with path.open(newline='', encoding='utf-8') as stream:
-            reader = csv.DictReader(stream)
-            fields = reader.fieldnames or ()
-            missing = [c for c in COLUMNS if c not in fields]
-            if missing:
-                raise ScenarioError(f'{path}: the exits need the columns '
-                                    f'{", ".join(COLUMNS)} (t optional); missing '
-                                    f'{", ".join(missing)}')
-            rows = []
-            for number, row in enumerate(reader, start=2):
-                try:
-                    particle = int(row['particle'])
-                    angle = float(row['angle_deg'])
-                    cell = (row.get('t') or '').strip() if 't' in fields else ''
-                    t = float(cell) if cell else math.nan
-                except (TypeError, ValueError) as exc:
-                    raise ScenarioError(f'{path} line {number}: {exc}') from None
-                if particle < 0 or not math.isfinite(angle) or math.isinf(t):
-                    raise ScenarioError(f'{path} line {number}: particle must be >= 0, '
-                                        'angle_deg and t finite')
-                rows.append((particle, angle, t))
-    except OSError as exc:
-        raise ScenarioError(f'cannot read the exits {path}: {exc.strerror or exc}') from exc
+    fields, lines = read_table(path, COLUMNS, 't', 'exits')
+    rows = []
+    for number, row in lines:
+        try:
+            particle = int(row['particle'])
+            angle = float(row['angle_deg'])
+            cell = (row.get('t') or '').strip() if 't' in fields else ''
+            t = float(cell) if cell else math.nan
+        except (TypeError, ValueError) as exc:
+            raise ScenarioError(f'{path} line {number}: {exc}') from None
+        if particle < 0 or not math.isfinite(angle) or math.isinf(t):
+            raise ScenarioError(f'{path} line {number}: particle must be >= 0, angle_deg and '
+                                't finite')
+        rows.append((particle, angle, t))
     if not rows:
         raise ScenarioError(f'{path}: no exits')
     particles = [p for p, _, _ in rows]

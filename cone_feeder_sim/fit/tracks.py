@@ -36,7 +36,7 @@ from ..formats.cdr import default_codec
 from ..formats.mcap_reader import open_recording, parse_run_source
 from ..formats.pointcloud import cloud_points
 
-__all__ = ['read_tracks', 'read_tracks_csv', 'read_tracks_mcap', 'Tracks']
+__all__ = ['read_table', 'read_tracks', 'read_tracks_csv', 'read_tracks_mcap', 'Tracks']
 
 #: The columns a tracks file must have (``z`` is optional).
 COLUMNS = ('particle', 't', 'x', 'y')
@@ -64,33 +64,46 @@ class Tracks:
         return int(self.t.shape[0])
 
 
-def read_tracks_csv(path: str | Path) -> Tracks:
-    """Read a tracks file; raise ScenarioError naming the file, the row and the column."""
-    path = Path(path)
+def read_table(path: Path, columns: tuple[str, ...], optional: str,
+               what: str) -> tuple[tuple[str, ...], list[tuple[int, dict[str, str]]]]:
+    """
+    Read a CSV file with a header; return its columns and its (line number, row) pairs.
+
+    Raise ScenarioError naming the file when it cannot be read or lacks one of ``columns``;
+    ``what`` names its content and ``optional`` its optional columns in that message.
+    """
     try:
         with path.open(newline='', encoding='utf-8') as stream:
             reader = csv.DictReader(stream)
-            missing = [c for c in COLUMNS if c not in (reader.fieldnames or ())]
+            fields = tuple(reader.fieldnames or ())
+            missing = [c for c in columns if c not in fields]
             if missing:
-                raise ScenarioError(f'{path}: the tracks need the columns '
-                                    f'{", ".join(COLUMNS)} (z optional); missing '
+                raise ScenarioError(f'{path}: the {what} need the columns '
+                                    f'{", ".join(columns)} ({optional} optional); missing '
                                     f'{", ".join(missing)}')
-            has_z = 'z' in (reader.fieldnames or ())
-            rows = []
-            for number, row in enumerate(reader, start=2):
-                try:
-                    particle = int(row['particle'])
-                    values = [float(row[c]) for c in ('t', 'x', 'y')]
-                    z = float(row['z']) if has_z else math.nan
-                except (TypeError, ValueError) as exc:
-                    raise ScenarioError(f'{path} line {number}: {exc}') from None
-                if particle < 0 or not all(math.isfinite(v) for v in values) or (
-                        has_z and not math.isfinite(z)):
-                    raise ScenarioError(f'{path} line {number}: particle must be >= 0 and '
-                                        'every value finite')
-                rows.append((values[0], particle, values[1], values[2], z))
+            return fields, list(enumerate(reader, start=2))
     except OSError as exc:
-        raise ScenarioError(f'cannot read the tracks {path}: {exc.strerror or exc}') from exc
+        raise ScenarioError(f'cannot read the {what} {path}: {exc.strerror or exc}') from exc
+
+
+def read_tracks_csv(path: str | Path) -> Tracks:
+    """Read a tracks file; raise ScenarioError naming the file, the row and the column."""
+    path = Path(path)
+    fields, lines = read_table(path, COLUMNS, 'z', 'tracks')
+    has_z = 'z' in fields
+    rows = []
+    for number, row in lines:
+        try:
+            particle = int(row['particle'])
+            values = [float(row[c]) for c in ('t', 'x', 'y')]
+            z = float(row['z']) if has_z else math.nan
+        except (TypeError, ValueError) as exc:
+            raise ScenarioError(f'{path} line {number}: {exc}') from None
+        if particle < 0 or not all(math.isfinite(v) for v in values) or (
+                has_z and not math.isfinite(z)):
+            raise ScenarioError(f'{path} line {number}: particle must be >= 0 and every value '
+                                'finite')
+        rows.append((values[0], particle, values[1], values[2], z))
     if not rows:
         raise ScenarioError(f'{path}: no tracks')
     rows.sort()
