@@ -199,6 +199,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help='where to write the estimates, errors and correlations')
     fit.add_argument('--report', metavar='PNG',
                      help='draw the tracks against the fitted simulation, and the residuals')
+    fit.add_argument('--tracks', metavar='TRACKS',
+                     help="tracks (CSV) or a recording (RUN.mcap) instead of the fit file's")
     fit.add_argument('--scheduler', metavar='ADDRESS',
                      help="run the fit's simulations on a running Dask scheduler "
                           "(tcp://host:port), the sweep's cluster; default: this process")
@@ -301,7 +303,7 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
     from .fit.solve import fit
     from .fit.spec import load_fit
 
-    spec = load_fit(args.fit)
+    spec = load_fit(args.fit, args.tracks)
     check_writable(args.out, 'the result')
     if args.report:
         check_writable(args.report, 'the report')

@@ -18,12 +18,14 @@ Bounded least squares of a fit, with standard errors, correlations and warnings.
 ``scipy.optimize.least_squares`` (trust-region reflective, bounds, finite-difference
 Jacobian) searches θ: log p for a parameter whose range is positive, p otherwise. With
 ``method: global``, ``scipy.optimize.differential_evolution`` first searches the whole box
-of bounds for the least sum of squares (seeded, its generations' simulations on
-``workers`` threads: the compiled kernels release the GIL), and least squares then starts
-from its best point: for multimodal cases, where a local search stops in the wrong valley. At the
-optimum, with J the Jacobian in θ and s² = |r|² / (m - n) the residual variance, the
-covariance of θ is s² (JᵀJ)⁻¹; the delta method carries it to p (dp/dθ = p in log scale).
-The 95 % interval is θ ± 1.96 σ_θ mapped back (so it stays positive in log scale).
+of bounds for the least sum of squares (seeded, a generation's simulations side by side),
+and least squares then starts from its best point: for multimodal cases, where a local
+search stops in the wrong valley. With ``segments``, a multiple-shooting fit
+(:mod:`shooting`) runs first, and least squares starts both from its estimate and from where
+it started; the lower cost wins. At the optimum, with J the Jacobian in θ and
+s² = |r|² / (m - n) the residual variance, the covariance of θ is s² (JᵀJ)⁻¹; the delta
+method carries it to p (dp/dθ = p in log scale). The 95 % interval is θ ± 1.96 σ_θ mapped
+back (so it stays positive in log scale).
 
 Parameters the data cannot identify are named in the warnings, never silently reported: a
 near-singular Jacobian (condition number above :data:`CONDITION_LIMIT`, naming the keys of
@@ -136,8 +138,8 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
         starts = [np.clip(theta_of(np.array(spec.start)), lb, ub)]
         if spec.method == 'global':
             starts = [_global_search(problem, task, lb, ub, counted)]
-        if spec.segments is not None:
-            starts = [_multiple_shooting(problem, task.values, starts[0], lb, ub, batch)]
+        if spec.segments is not None:  # its estimate, and where it started: the best wins
+            starts.insert(0, _multiple_shooting(problem, task.values, starts[0], lb, ub, batch))
         rng = np.random.default_rng(STARTS_SEED)
         starts += [rng.uniform(lb, ub) for _ in range(spec.starts - 1)]
         last: dict[bytes, np.ndarray] = {}

@@ -281,10 +281,18 @@ def _check_tracks(tracks: Tracks, scenario: Scenario) -> None:
                             f's], got {tracks.t.min():g} .. {tracks.t.max():g} s')
 
 
-def load_fit(path: str | Path) -> FitSpec:
-    """Read and validate a fit file (paths in it relative to it)."""
+def load_fit(path: str | Path, tracks: str | Path | None = None) -> FitSpec:
+    """
+    Read and validate a fit file (paths in it relative to it).
+
+    tracks: a tracks file or recording (relative to the working directory) that replaces the
+    file's ``tracks``.
+    """
     path = Path(path)
     try:
-        return fit_from_mapping(read_yaml(path), path.parent)
+        content = read_yaml(path)
+        if tracks is not None and isinstance(content, Mapping):
+            content = {**content, 'tracks': str(Path(tracks).resolve())}
+        return fit_from_mapping(content, path.parent)
     except ConeFeederError as exc:
         raise ScenarioError(f'{path}: {exc}') from exc

@@ -195,6 +195,14 @@ def test_a_recorded_run_is_a_test_subject(tmp_path: Path) -> None:
     assert np.diff(np.unique(spec.tracks.t)).min() == pytest.approx(0.03)
     result = fit(FitProblem(spec))
     assert result.estimate[0] == pytest.approx(400.0, rel=1e-4)  # no noise: the truth
+    # the command's --tracks replaces the fit file's tracks
+    (tmp_path / 'fit.yaml').write_text(yaml.safe_dump({
+        'scenario': {**BASE, 'duration': 1.5}, 'tracks': 'missing.csv', 'tracks_every': 3,
+        'free': {'model.d': [10.0, 1000.0]}}))
+    assert main(['fit', str(tmp_path / 'fit.yaml'), '--tracks', str(tmp_path / 'run.mcap'),
+                 '--out', str(tmp_path / 'r.yaml')]) == 0
+    d = yaml.safe_load((tmp_path / 'r.yaml').read_text())['parameters']['model.d']
+    assert d['estimate'] == pytest.approx(result.estimate[0], rel=1e-9)
 
 
 def test_the_global_search_finds_the_valley_the_local_one_misses(tmp_path: Path) -> None:
