@@ -204,6 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument('--scheduler', metavar='ADDRESS',
                      help="run the fit's simulations on a running Dask scheduler "
                           "(tcp://host:port), the sweep's cluster; default: this process")
+    fit.add_argument('--workers', type=int, metavar='N',
+                     help="run the fit's simulations on a local Dask cluster of N worker "
+                          'processes; default: this process')
     recover = sub.add_parser(
         'recover', help='copy the readable part of an unfinished or damaged MCAP file into a '
                         'complete one (with summary and footer)')
@@ -303,6 +306,12 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
     from .fit.solve import fit
     from .fit.spec import load_fit
 
+    if args.workers is not None:
+        if args.scheduler is not None:
+            raise ConeFeederError('--workers sets the local cluster; a scheduler has its own '
+                                  'workers (give one or the other)')
+        if args.workers < 1:
+            raise ConeFeederError(f'--workers must be at least 1, got {args.workers}')
     spec = load_fit(args.fit, args.tracks)
     check_writable(args.out, 'the result')
     if args.report:
@@ -310,7 +319,7 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
     warm_up()
     start = time.perf_counter()
     problem = FitProblem(spec)
-    if args.scheduler is None:
+    if args.scheduler is None and args.workers is None:
         result = fit(problem)
     else:
         try:
@@ -320,7 +329,7 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
             if exc.name not in ('dask', 'distributed'):
                 raise
             raise ConeFeederError(SWEEP_INSTALL) from None
-        with dask_client(args.scheduler) as client:
+        with dask_client(args.scheduler, args.workers) as client:
             result = fit(problem, mapper=dask_mapper(client))
     Path(args.out).write_text(yaml.safe_dump(result.as_mapping(), sort_keys=False),
                               encoding='utf-8')

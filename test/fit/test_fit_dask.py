@@ -52,3 +52,14 @@ def test_a_fit_on_a_dask_cluster_is_the_fit_here(tmp_path: Path,
     result = yaml.safe_load((tmp_path / 'r.yaml').read_text())
     assert result['parameters']['model.d']['estimate'] == here[0].estimate[0]
     assert 'simulations' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('flags, fragment', [
+    (['--workers', '2', '--scheduler', 'tcp://127.0.0.1:1'], '--workers sets the local cluster'),
+    (['--workers', '0'], '--workers must be at least 1'),
+])
+def test_a_cluster_is_asked_for_once(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                     flags: list, fragment: str) -> None:
+    assert main(['fit', str(tmp_path / 'fit.yaml'), '--out', str(tmp_path / 'r.yaml'),
+                 *flags]) != 0
+    assert fragment in capsys.readouterr().err
