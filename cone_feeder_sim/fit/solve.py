@@ -231,8 +231,9 @@ def _statistics(problem: FitProblem, result: Any, estimate: np.ndarray,
     correlation = np.nan_to_num(correlation)
     np.fill_diagonal(correlation, 1.0)
     theta = np.where(logs, np.log(np.where(logs, estimate, 1.0)), estimate)
-    low = np.where(logs, np.exp(theta - 1.96 * sigma_theta), estimate - 1.96 * stderr)
-    high = np.where(logs, np.exp(theta + 1.96 * sigma_theta), estimate + 1.96 * stderr)
+    with np.errstate(over='ignore'):  # an unidentified key's interval may reach infinity
+        low = np.where(logs, np.exp(theta - 1.96 * sigma_theta), estimate - 1.96 * stderr)
+        high = np.where(logs, np.exp(theta + 1.96 * sigma_theta), estimate + 1.96 * stderr)
     warnings = []
     if condition > CONDITION_LIMIT or not np.all(np.isfinite(stderr)) or sv[-1] == 0.0:
         weak = [keys[i] for i in np.flatnonzero(np.abs(vt[-1]) > 0.3)]
