@@ -339,8 +339,9 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
         err.write(f'warning: {warning}\n')
     windows = (f' and {result.window_simulations} window simulations'
                if result.window_simulations else '')
+    unit = ' m^2' if spec.exits is None else ' (residuals in sigmas)'
     err.write(f'{result.simulations} simulations{windows} in '
-              f'{time.perf_counter() - start:.1f} s, cost {result.cost:.3g} m^2; result '
+              f'{time.perf_counter() - start:.1f} s, cost {result.cost:.3g}{unit}; result '
               f'written to {args.out}\n')
     if args.report:
         from .fit.figure import draw_fit

@@ -16,9 +16,10 @@
 Observed exits, the data of ``residual: exits``: where and when each piece left the cone.
 
 An exits file is a CSV with the columns ``particle`` (the 0-based index of the piece in the
-scenario), ``angle_deg`` (atan2(y, x) in degrees, where it crossed the rim) and, optionally,
-``t`` (s, when; an empty cell: not known). The events file of ``cone-feeder-sim run --events``
-has these columns, so a simulated run is a test subject here too.
+scenario), ``angle_deg`` (atan2(y, x) in degrees, where it crossed the rim; an empty cell: the
+piece stayed on the cone to the end) and, optionally, ``t`` (s, when; an empty cell: not
+known). The events file of ``cone-feeder-sim run --events`` has these columns, so a simulated
+run is a test subject here too.
 
 :func:`simulate_exits` runs the scenario to its end and returns each piece's exit. A piece that
 has not left by the end counts as leaving at the end, at the angle where it is: a continuous
@@ -48,7 +49,11 @@ STRIDE = 0.1
 
 @dataclass(frozen=True, eq=False)
 class Exits:
-    """Observed exits: particle (M,) int64, angle_deg (M,) deg, t (M,) s (NaN: not known)."""
+    """
+    Observed exits: particle (M,) int64, angle_deg (M,) deg, t (M,) s.
+
+    angle_deg NaN: the piece stayed on the cone to the end; t NaN: the time is not known.
+    """
 
     particle: np.ndarray
     angle_deg: np.ndarray
@@ -57,6 +62,27 @@ class Exits:
     def __len__(self) -> int:
         """Return the number of observed exits."""
         return int(self.particle.shape[0])
+
+    def residuals(self, angle: np.ndarray, t: np.ndarray, duration: float,
+                  sigma: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return the residuals against simulated exits, and the piece of each residual.
+
+        angle (P,) deg and t (P,) s: :func:`simulate_exits`; sigma: (deg, s). The residuals
+        (1) are, in this order: the angle differences of the pieces that left, wrapped into
+        [-180, 180), over sigma[0]; the time differences where the time is known, over
+        sigma[1]; for the pieces that stayed, how long before the end the simulated piece
+        left (0 if it stayed too), over sigma[1].
+        """
+        left = np.isfinite(self.angle_deg)
+        timed = np.isfinite(self.t)
+        stayed = ~left
+        owner = np.concatenate([self.particle[left], self.particle[timed],
+                                self.particle[stayed]])
+        return np.concatenate([
+            wrap_degrees(angle[self.particle[left]] - self.angle_deg[left]) / sigma[0],
+            (t[self.particle[timed]] - self.t[timed]) / sigma[1],
+            (duration - t[self.particle[stayed]]) / sigma[1]]), owner
 
 
 def read_exits_csv(path: str | Path) -> Exits:
@@ -67,14 +93,18 @@ def read_exits_csv(path: str | Path) -> Exits:
     for number, row in lines:
         try:
             particle = int(row['particle'])
-            angle = float(row['angle_deg'])
+            cell = (row.get('angle_deg') or '').strip()
+            angle = float(cell) if cell else math.nan
             cell = (row.get('t') or '').strip() if 't' in fields else ''
             t = float(cell) if cell else math.nan
         except (TypeError, ValueError) as exc:
             raise ScenarioError(f'{path} line {number}: {exc}') from None
-        if particle < 0 or not math.isfinite(angle) or math.isinf(t):
+        if particle < 0 or math.isinf(angle) or math.isinf(t):
             raise ScenarioError(f'{path} line {number}: particle must be >= 0, angle_deg and '
                                 't finite')
+        if math.isnan(angle) and not math.isnan(t):
+            raise ScenarioError(f'{path} line {number}: a piece that stayed (no angle_deg) '
+                                'has no exit time')
         rows.append((particle, angle, t))
     if not rows:
         raise ScenarioError(f'{path}: no exits')

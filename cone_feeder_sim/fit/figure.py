@@ -58,7 +58,8 @@ def _draw_exits(problem: FitProblem, result: FitResult, figure: Figure) -> None:
     assert exits is not None
     angle, t = simulate_exits(problem.scenario(result.estimate))
     where, when = figure.subplots(1, 2)
-    where.plot(exits.particle, exits.angle_deg, 'x', markersize=9, label='observed')
+    where.plot(exits.particle, exits.angle_deg, 'x', markersize=9, label='observed (none: '
+               'stayed)')
     where.plot(exits.particle, angle[exits.particle], 'o', fillstyle='none', markersize=9,
                label='fitted simulation')
     where.set_xlabel('piece')

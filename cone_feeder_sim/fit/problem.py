@@ -28,7 +28,7 @@ import threading
 
 import numpy as np
 
-from .exits import simulate_exits, wrap_degrees
+from .exits import simulate_exits
 from .spec import FitSpec
 from .tracks import Tracks
 from ..feeder.scenario import Scenario
@@ -87,18 +87,13 @@ def residuals_of(spec: FitSpec, values: np.ndarray) -> np.ndarray:
     Return the residual vector of the fit ``spec`` at the free values ``values``.
 
     Trajectory: predicted minus tracked positions (m), (M * 2,) or (M * 3,) with z.
-    Exits: per observed exit, the angle difference wrapped into [-180, 180) over its
-    sigma, then, where the time is known, the time difference over its sigma (1).
+    Exits: angle and time differences over their sigmas (:meth:`Exits.residuals`).
     """
     scenario = scenario_from_mapping(spec.scenario_mapping(values), spec.base_dir)
     exits = spec.exits
     if exits is not None:
         angle, t = simulate_exits(scenario)
-        sigma_angle, sigma_t = spec.exit_sigma
-        known = np.isfinite(exits.t)
-        return np.concatenate([
-            wrap_degrees(angle[exits.particle] - exits.angle_deg) / sigma_angle,
-            (t[exits.particle[known]] - exits.t[known]) / sigma_t])
+        return exits.residuals(angle, t, scenario.duration, spec.exit_sigma)[0]
     tracks = spec.tracks
     diff = predict(scenario, tracks) - tracks.xyz
     return diff[:, :3 if tracks.has_z else 2].reshape(-1)
@@ -165,8 +160,11 @@ class FitProblem:
         """Return the root mean square residual of each piece (m; exits: in sigmas)."""
         exits = self.spec.exits
         if exits is not None:
-            residuals = self.residuals(values)
-            owner = np.concatenate([exits.particle, exits.particle[np.isfinite(exits.t)]])
+            scenario = self.scenario(values)
+            self.count(1)
+            angle, t = simulate_exits(scenario)
+            residuals, owner = exits.residuals(angle, t, scenario.duration,
+                                               self.spec.exit_sigma)
             return {int(p): float(np.sqrt(np.mean(residuals[owner == p] ** 2)))
                     for p in exits.particle}
         rows = self.residuals(values).reshape(len(self.spec.tracks), self._columns)

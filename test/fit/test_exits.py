@@ -19,7 +19,7 @@ from pathlib import Path
 
 from cone_feeder_sim.cli import main
 from cone_feeder_sim.errors import ScenarioError
-from cone_feeder_sim.fit.exits import read_exits_csv, simulate_exits, wrap_degrees
+from cone_feeder_sim.fit.exits import Exits, read_exits_csv, simulate_exits, wrap_degrees
 from cone_feeder_sim.fit.problem import FitProblem
 from cone_feeder_sim.fit.solve import fit
 from cone_feeder_sim.fit.spec import fit_from_mapping, load_fit
@@ -71,6 +71,35 @@ def test_angles_alone_with_their_sigma(tmp_path: Path) -> None:
     assert 0.0 < result.stderr[0] < 0.2
 
 
+def test_exit_residuals_by_hand() -> None:
+    # piece 0 left at 350 deg at 1.0 s; piece 1 left at 10 deg, time unknown; piece 2 stayed
+    exits = Exits(np.array([0, 1, 2]), np.array([350.0, 10.0, np.nan]),
+                  np.array([1.0, np.nan, np.nan]))
+    angle = np.array([5.0, 20.0, 100.0])  # simulated: 0 at 5 deg, 1 at 20 deg
+    t = np.array([1.5, 2.0, 2.5])  # and 2 left at 2.5 s of a 3-s run
+    residuals, owner = exits.residuals(angle, t, 3.0, (2.0, 0.1))
+    np.testing.assert_allclose(residuals, [15.0 / 2.0, 10.0 / 2.0, 0.5 / 0.1, 0.5 / 0.1])
+    assert owner.tolist() == [0, 1, 0, 2]
+    t[2] = 3.0  # it stayed too
+    assert exits.residuals(angle, t, 3.0, (2.0, 0.1))[0][3] == 0.0
+
+
+def test_a_piece_that_stayed_is_data(tmp_path: Path) -> None:
+    truth = set_scenario_key(BASE, 'rotation.1.1', -7.5)
+    angle, t = simulate_exits(scenario_from_mapping(truth))
+    stayed = np.flatnonzero(t >= BASE['duration'])
+    assert len(stayed) >= 1
+    rows = [f'{p},{float(angle[p])!r}' if p not in stayed else f'{p},' for p in range(5)]
+    (tmp_path / 'exits.csv').write_text('particle,angle_deg\n' + '\n'.join(rows) + '\n')
+    spec = fit_from_mapping({'scenario': BASE, 'tracks': 'exits.csv', 'residual': 'exits',
+                             'free': FREE}, tmp_path)
+    assert np.isnan(spec.exits.angle_deg[stayed]).all()
+    problem = FitProblem(spec)
+    assert np.abs(problem.residuals(np.array([-7.5]))).max() < 0.01  # the truth fits
+    # at -10 rad/s the pieces that stayed leave: their residuals say how early
+    assert problem.residuals(np.array([-10.0]))[-len(stayed):].min() > 1.0
+
+
 def test_angles_wrap() -> None:
     np.testing.assert_allclose(wrap_degrees([359.0 - 1.0, 1.0 - 359.0, 180.0, -180.0]),
                                [-2.0, 2.0, -180.0, -180.0])
@@ -82,6 +111,7 @@ def test_angles_wrap() -> None:
     ('particle,angle_deg\n9,10\n', {}, 'particle(s) 9 are not in the scenario'),
     ('particle,t,angle_deg\n0,7.0,10\n', {}, 'exit times must lie in [0, duration = 1.5 s]'),
     ('particle,angle_deg\n0,abc\n', {}, 'line 2'),
+    ('particle,t,angle_deg\n0,0.5,\n', {}, 'a piece that stayed (no angle_deg) has no exit'),
     ('particle,angle_deg\n0,10\n', {'segments': 0.5}, 'segments (multiple shooting) needs'),
     ('particle,angle_deg\n0,10\n', {'exit_sigma': {'angle_deg': 0.0}},
      'exit_sigma.angle_deg must be a positive number'),
