@@ -21,6 +21,7 @@ piece, with the cone's rim. Right: each piece's residual distance (mm) over time
 """
 
 from pathlib import Path
+import textwrap
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -44,7 +45,7 @@ def draw_fit(problem: FitProblem, result: FitResult, path: str | Path) -> None:
         _draw_tracks(problem, result, figure)
     estimates = ', '.join(f'{k} = {e:.4g} +- {s:.2g}' for k, e, s in zip(
         result.keys, result.estimate, result.stderr))
-    figure.axes[-1].set_title(estimates, fontsize=8)
+    figure.suptitle('\n'.join(textwrap.wrap(estimates, 150)), fontsize=8)
     figure.tight_layout()
     try:
         figure.savefig(path)
