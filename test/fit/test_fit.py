@@ -247,3 +247,22 @@ def test_multiple_shooting_converges_where_single_shooting_does_not(tmp_path: Pa
     assert problem.window_simulations > 0
     for value, estimate, stderr in zip((315.0, 0.7225), shooting.estimate, shooting.stderr):
         assert abs(estimate - value) < 2.0 * stderr
+
+
+def test_tracks_that_start_late_and_lose_a_piece(tmp_path: Path) -> None:
+    base = {**BASE, 'duration': 2.0, 'particles': BASE['particles'][:3]}
+    truth = set_scenario_key(base, 'model.d', 315.0)
+    write_tracks(tmp_path / 'all.csv', truth, 30.0, 0.001, 8, lose_exits=True)
+    with (tmp_path / 'all.csv').open() as stream:
+        rows = list(csv.reader(stream))
+    # the camera starts at 0.3 s (piece 2 only at 0.6 s) and loses piece 1 at 1.0 s
+    kept = [r for r in rows[1:] if float(r[1]) >= (0.6 if r[0] == '2' else 0.3)
+            and not (r[0] == '1' and float(r[1]) > 1.0)]
+    with (tmp_path / 'tracks.csv').open('w', newline='') as stream:
+        csv.writer(stream).writerows([rows[0], *kept])
+    for extra in ({}, {'segments': 0.5}):
+        spec = fit_from_mapping({'scenario': base, 'tracks': 'tracks.csv',
+                                 'free': {'model.d': [10.0, 1000.0]}, **extra}, tmp_path)
+        assert spec.tracks.t.min() == pytest.approx(0.3, abs=0.02)
+        result = fit(FitProblem(spec))
+        assert abs(result.estimate[0] - 315.0) < 2.0 * result.stderr[0], extra
