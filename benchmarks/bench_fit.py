@@ -29,6 +29,8 @@ time spent simulating, summed over the threads::
     .venv/bin/python benchmarks/bench_fit.py
 """
 
+from collections.abc import Iterator
+import contextlib
 import csv
 import os
 from pathlib import Path
@@ -114,13 +116,21 @@ def run(label: str, content: dict, folder: Path) -> None:
           'time)')
 
 
-def main() -> None:
-    """Make the tracks, fit three ways, print the figures."""
+@contextlib.contextmanager
+def tracks_folder() -> Iterator[Path]:
+    """Print the calibration, load the kernels, yield a folder with the tracks; calibrate."""
     print(calibration_line())
     warm_up()
     with tempfile.TemporaryDirectory() as name:
         folder = Path(name)
         write_tracks(folder)
+        yield folder
+    print(calibration_line())
+
+
+def main() -> None:
+    """Make the tracks, fit six ways, print the figures."""
+    with tracks_folder() as folder:
         plain = {'scenario': BASE, 'tracks': 'tracks.csv', 'free': FREE}
         run('single shooting, 1 thread', plain, folder)
         run('single shooting, a thread per core', {**plain, 'workers': 0}, folder)
@@ -131,7 +141,6 @@ def main() -> None:
                 {**far, 'workers': workers}, folder)
             run(f'from d = 1000, mu_C = 0.35: multiple shooting, segments 0.25, workers '
                 f'{workers}', {**far, 'segments': 0.25, 'workers': workers}, folder)
-    print(calibration_line())
 
 
 if __name__ == '__main__':

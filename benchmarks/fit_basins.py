@@ -24,17 +24,13 @@ standard errors of it. Prints the grid of each method (+ found, . not) and the c
     .venv/bin/python benchmarks/fit_basins.py
 """
 
-from pathlib import Path
-import tempfile
 import time
 
-from bench_fit import BASE, FREE, write_tracks
-from calibration import calibration_line
+from bench_fit import BASE, FREE, tracks_folder
 from cone_feeder_sim.fit.problem import FitProblem
 from cone_feeder_sim.fit.solve import fit
 from cone_feeder_sim.fit.spec import fit_from_mapping
 from cone_feeder_sim.formats.scenario_file import set_scenario_key
-from cone_feeder_sim.physics.simulation import warm_up
 import numpy as np
 
 D_STARTS = (15.0, 50.0, 150.0, 500.0, 1000.0)
@@ -45,11 +41,7 @@ TRUTH = (315.0, 0.7225)
 
 def main() -> None:
     """Fit from every start with every method; print the grids."""
-    print(calibration_line())
-    warm_up()
-    with tempfile.TemporaryDirectory() as name:
-        folder = Path(name)
-        write_tracks(folder)
+    with tracks_folder() as folder:
         for label, segments in METHODS:
             start = time.perf_counter()
             rows = []
@@ -70,7 +62,6 @@ def main() -> None:
                   f'starts ({time.perf_counter() - start:.0f} s); d = '
                   f'{", ".join(f"{d:g}" for d in D_STARTS)} left to right')
             print('\n'.join(rows), flush=True)
-    print(calibration_line())
 
 
 if __name__ == '__main__':

@@ -298,6 +298,16 @@ def cmd_compile(err: TextIO) -> int:
     return 0
 
 
+def check_cluster(args: argparse.Namespace) -> None:
+    """Refuse --workers with --scheduler, and a local cluster of no workers."""
+    if args.workers is not None:
+        if args.scheduler is not None:
+            raise ConeFeederError('--workers sets the local cluster; a scheduler has its own '
+                                  'workers (give one or the other)')
+        if args.workers < 1:
+            raise ConeFeederError(f'--workers must be at least 1, got {args.workers}')
+
+
 def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
     """Fit a scenario to tracks; write RESULT.yaml; warn of what the data cannot identify."""
     import yaml
@@ -306,12 +316,7 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
     from .fit.solve import fit
     from .fit.spec import load_fit
 
-    if args.workers is not None:
-        if args.scheduler is not None:
-            raise ConeFeederError('--workers sets the local cluster; a scheduler has its own '
-                                  'workers (give one or the other)')
-        if args.workers < 1:
-            raise ConeFeederError(f'--workers must be at least 1, got {args.workers}')
+    check_cluster(args)
     spec = load_fit(args.fit, args.tracks)
     check_writable(args.out, 'the result')
     if args.report:
@@ -358,12 +363,7 @@ def cmd_sweep(args: argparse.Namespace, err: TextIO) -> int:
     """Run a sweep's pending jobs; return 0 if all are done, 1 if some failed."""
     from .sweep.spec import load_sweep
 
-    if args.workers is not None:
-        if args.scheduler is not None:
-            raise ConeFeederError('--workers sets the local cluster; a scheduler has its own '
-                                  'workers (give one or the other)')
-        if args.workers < 1:
-            raise ConeFeederError(f'--workers must be at least 1, got {args.workers}')
+    check_cluster(args)
     sweep = load_sweep(args.sweep)  # a sweep file is checked without Dask too
     try:
         from .sweep.run import run_sweep
