@@ -15,9 +15,10 @@
 """
 The rooms of the package import one way (doc/architecture.md).
 
-physics <- feeder <- formats <- report, sweep, rl <- ros, cli: a module imports only from its
-own room and the rooms before it (ros uses rl in policy_controller only); physics imports no
-rclpy, mcap or yaml; nothing below ros imports rclpy or ROS message packages.
+physics <- feeder <- formats, view <- report, sweep, rl, fit <- ros, cli: a module imports
+only from its own room and the rooms before it (ros uses rl in policy_controller only);
+physics imports no rclpy, mcap or yaml; nothing below ros imports rclpy or ROS message
+packages.
 """
 
 import ast
@@ -28,7 +29,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / 'cone_feeder_sim'
 #: Rank of each room; physics and weigher, ros, report and sweep are side by side.
 RANK = {'errors': 0, '__init__': 0, 'physics': 1, 'weigher': 1, 'feeder': 2, 'formats': 3,
-        'report': 4, 'sweep': 4, 'rl': 4, 'fit': 4, 'ros': 5, 'cli': 5}
+        'view': 3, 'report': 4, 'sweep': 4, 'rl': 4, 'fit': 4, 'ros': 5, 'cli': 5}
 SIDE_BY_SIDE = ('report', 'sweep', 'rl', 'fit')
 #: Rooms that must not import each other although one ranks after the other.
 APART = {('ros', 'report'), ('ros', 'sweep'), ('ros', 'fit'), ('cli', 'ros')}

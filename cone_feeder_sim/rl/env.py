@@ -76,12 +76,16 @@ from .spaces import (
     action_space, decode_action, features, mass_grid, observation, observation_space)
 from ..errors import EnvConfigError
 from ..feeder.engine import ChannelFeed, FeederEngine, TickResult
-from ..physics.params import P_M
+from ..physics.params import P_M, P_S0
+from ..physics.simulation import world_from_cone
+from ..view.frame import top_view
 
 __all__ = ['ConeFeederEnv']
 
 #: Largest fill rate (pieces per tick, mean) of the drop of the initial pieces.
 FILL_TICKS = 4
+#: Side (pixels) of the frames of render_mode 'rgb_array'.
+FRAME_SIZE = 256
 #: Most ticks the initial drop may take before a reset gives up.
 MAX_FILL_TICKS = 10_000
 
@@ -95,14 +99,16 @@ class ConeFeederEnv(gymnasium.Env):
     config: the configuration: None (``config/rl.yaml``), the path of a YAML file with
     keys of ``config/rl.yaml`` (the rest keep the defaults), a mapping of such keys,
     or an :class:`~cone_feeder_sim.rl.config.EnvConfig`.
-    render_mode: None (no rendering yet: issue 22 brings the view).
+    render_mode: None, or 'rgb_array': :meth:`render` returns a top view of the cone
+    (FRAME_SIZE x FRAME_SIZE x 3 uint8, :func:`~cone_feeder_sim.view.frame.top_view`).
+    'human' (the live view) is not there yet.
     **overrides: keys of ``config/rl.yaml`` merged over ``config`` (sections key by
     key), e.g. ``episode_time=10.0, interactions={'enabled': True}``.
 
     Raises EnvConfigError naming the key of a bad configuration.
     """
 
-    metadata: dict[str, Any] = {'render_modes': []}
+    metadata: dict[str, Any] = {'render_modes': ['rgb_array']}
 
     def __init__(self, config: str | Path | Mapping[str, Any] | EnvConfig | None = None,
                  render_mode: str | None = None, **overrides: Any) -> None:
@@ -113,10 +119,12 @@ class ConeFeederEnv(gymnasium.Env):
             self.config = config
         else:
             self.config = load_env_config(config, overrides)
-        if render_mode is not None:
-            raise EnvConfigError(f'render_mode {render_mode!r} is not available; '
-                                 'render modes: none yet')
+        if render_mode not in (None, *self.metadata['render_modes']):
+            raise EnvConfigError(f'render_mode {render_mode!r} is not available; render '
+                                 f'modes: {", ".join(self.metadata["render_modes"])} (the '
+                                 'live view, human, is not there yet)')
         self.render_mode = render_mode
+        self.metadata = {**self.metadata, 'render_fps': 1.0 / self.config.control_period}
         self.observation_space = observation_space(self.config)
         self.action_space = action_space(self.config)
         model = self.config.engine.model
@@ -219,6 +227,17 @@ class ConeFeederEnv(gymnasium.Env):
             'exits': exits, 'failures': failures}
 
     # ------------------------------------------------------------------ observations
+
+    def render(self) -> np.ndarray | None:
+        """Return the top view (FRAME_SIZE, FRAME_SIZE, 3) uint8 with 'rgb_array', else None."""
+        if self.render_mode != 'rgb_array':
+            return None
+        engine = self.engine
+        state = engine.state
+        model = self.config.engine.model
+        positions = world_from_cone(state.y, engine.angle, engine.omega)[0][:, :2]
+        return top_view(positions, state.products[:, P_S0], np.zeros(state.count, dtype=int),
+                        model.r, model.channels, engine.angle, FRAME_SIZE)
 
     def features(self) -> np.ndarray:
         """Return the feature vector (F,) float32 of the current state (see the module)."""

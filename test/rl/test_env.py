@@ -22,6 +22,8 @@ import warnings
 from cone_feeder_sim.errors import EnvConfigError
 from cone_feeder_sim.physics.params import P_M
 from cone_feeder_sim.rl import ConeFeederEnv, ENV_ID
+from cone_feeder_sim.rl.env import FRAME_SIZE
+from cone_feeder_sim.view.frame import PALETTE
 import gymnasium
 from gymnasium.utils.env_checker import check_env
 import numpy as np
@@ -203,3 +205,17 @@ def test_step_before_reset_and_render_mode() -> None:
     with pytest.raises(EnvConfigError, match="render_mode 'human'"):
         ConeFeederEnv(render_mode='human')
     assert math.isfinite(env.config.episode_time)
+
+
+def test_rgb_array_frames_show_the_pieces() -> None:
+    env = ConeFeederEnv(render_mode='rgb_array', initial_pieces=10, episode_time=1.0)
+    assert env.metadata['render_fps'] == 10.0
+    env.reset(seed=3)
+    env.step(env.action_space.sample())
+    frame = env.render()
+    assert frame.shape == (FRAME_SIZE, FRAME_SIZE, 3) and frame.dtype == np.uint8
+    red = np.all(frame == PALETTE[0], axis=2).sum()
+    # ten discs of radius s0 = 25 mm, the rim at 0.9 of the half-width, some overlap
+    disc = math.pi * (0.025 / env.config.engine.model.r * 0.45 * FRAME_SIZE) ** 2
+    assert 4 * disc < red <= 10 * disc * 1.1
+    assert ConeFeederEnv(initial_pieces=0).render() is None
