@@ -71,6 +71,15 @@ class RunResult:
 Progress = Callable[[float, Simulator, StepResult], None]
 
 
+def start_simulator(scenario: Scenario) -> Simulator:
+    """Return a simulator at t = 0 with the scenario's pieces on the cone (ids 0 .. P - 1)."""
+    sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
+    for spec in scenario.particles:
+        sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
+                [spec.product])
+    return sim
+
+
 def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
                  stop: Callable[[], bool] | None = None,
                  weigher: Weigher | None = None) -> RunResult:
@@ -89,12 +98,9 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
     interval is never cut short. weigher: the machine to drive when the scenario has one
     (default: a new one), so that a progress callback can record it as it goes.
     """
-    sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
+    sim = start_simulator(scenario)
     feed = scenario.feed if scenario.feed is not None and scenario.feed.rate > 0.0 else None
     rng = np.random.default_rng(scenario.feed_seed)
-    for spec in scenario.particles:
-        sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
-                [spec.product])
     result = RunResult(pieces=len(scenario.particles))
     if scenario.weigher is None:
         weigher = None

@@ -26,7 +26,7 @@ has not left by the end counts as leaving at the end, at the angle where it is: 
 penalty that a search can follow.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 from pathlib import Path
 
@@ -34,15 +34,16 @@ import numpy as np
 
 from .tracks import read_table
 from ..errors import ScenarioError
+from ..feeder.runner import run_scenario
 from ..feeder.scenario import Scenario
-from ..physics.simulation import SimParams, Simulator
+from ..physics.simulation import Simulator, StepResult
 
 __all__ = ['Exits', 'read_exits_csv', 'simulate_exits', 'wrap_degrees']
 
 #: The columns an exits file must have (``t`` is optional).
 COLUMNS = ('particle', 'angle_deg')
-#: The interval (s) between the calls into the integrator. Exits are located inside steps, so
-#: it changes the results only within the solver's tolerance (0.002 deg against the runner's
+#: The runner's output interval (s) here. Exits are located inside steps, so it changes the
+#: results only within the solver's tolerance (0.002 deg against the runner's default
 #: 0.01 s, measured), and a run stops as soon as no piece is left.
 STRIDE = 0.1
 
@@ -88,14 +89,14 @@ class Exits:
 def read_exits_csv(path: str | Path) -> Exits:
     """Read an exits file; raise ScenarioError naming the file, the line and the column."""
     path = Path(path)
-    fields, lines = read_table(path, COLUMNS, 't', 'exits')
+    _, lines = read_table(path, COLUMNS, 't', 'exits')
     rows = []
     for number, row in lines:
         try:
             particle = int(row['particle'])
             cell = (row.get('angle_deg') or '').strip()
             angle = float(cell) if cell else math.nan
-            cell = (row.get('t') or '').strip() if 't' in fields else ''
+            cell = (row.get('t') or '').strip()
             t = float(cell) if cell else math.nan
         except (TypeError, ValueError) as exc:
             raise ScenarioError(f'{path} line {number}: {exc}') from None
@@ -123,30 +124,30 @@ def simulate_exits(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     """
     Run the scenario to its end; return each piece's exit angle (P,) (deg) and time (P,) (s).
 
+    The headless runner runs it, without its feed and weigher, at :data:`STRIDE`.
     A piece still on the cone at the end gets the end time and the angle where it is.
     """
-    sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
-    for spec in scenario.particles:
-        sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
-                [spec.product])
+    last: list[Simulator] = []
+
+    def keep(t: float, sim: Simulator, step: StepResult) -> None:
+        last[:] = [sim]
+
+    run = run_scenario(replace(scenario, output_interval=STRIDE, weigher=None, feed=None),
+                       keep)
     count = len(scenario.particles)
     angle = np.zeros(count)
     t = np.full(count, scenario.duration)
-    steps = max(1, math.ceil(scenario.duration / STRIDE - 1e-9))
-    for k in range(1, steps + 1):
-        step = sim.advance_to(min(k * STRIDE, scenario.duration))
-        angle[step.exits.ids] = step.exits.angle_deg
-        t[step.exits.ids] = step.exits.t
-        for failure in step.failures:
-            if all(math.isfinite(v) for v in failure.position):
-                angle[failure.particle_id] = math.degrees(
-                    math.atan2(failure.position[1], failure.position[0]))
-                t[failure.particle_id] = failure.t
-        if not sim.state.count:
-            break
-    if sim.state.count:
-        position = sim.world()[0]
-        angle[sim.state.ids] = np.degrees(np.arctan2(position[:, 1], position[:, 0]))
+    for exits in run.exits:
+        angle[exits.ids] = exits.angle_deg
+        t[exits.ids] = exits.t
+    for failure in run.failures:
+        if all(math.isfinite(v) for v in failure.position):
+            angle[failure.particle_id] = math.degrees(
+                math.atan2(failure.position[1], failure.position[0]))
+            t[failure.particle_id] = failure.t
+    if last and last[0].state.count:
+        position = last[0].world()[0]
+        angle[last[0].state.ids] = np.degrees(np.arctan2(position[:, 1], position[:, 0]))
     return np.mod(angle, 360.0), t
 
 

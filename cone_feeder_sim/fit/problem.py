@@ -31,21 +31,19 @@ import numpy as np
 from .exits import simulate_exits
 from .spec import FitSpec
 from .tracks import Tracks
+from ..feeder.runner import start_simulator
 from ..feeder.scenario import Scenario
 from ..formats.scenario_file import scenario_from_mapping
-from ..physics.simulation import SimParams, Simulator
+from ..physics.simulation import Simulator
 
-__all__ = ['FitProblem', 'predict', 'Residuals', 'residuals_of', 'SumOfSquares', 'trace']
+__all__ = ['exit_residuals', 'FitProblem', 'predict', 'Residuals', 'residuals_of',
+           'SumOfSquares', 'trace']
 
 
 def predict(scenario: Scenario, tracks: Tracks) -> np.ndarray:
     """Return the simulated positions (M, 3) (m, world frame) at the tracks' rows."""
-    sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
-    for spec in scenario.particles:
-        sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
-                [spec.product])
     start = np.array([spec.position for spec in scenario.particles], dtype=float)
-    return trace(sim, start, tracks.particle, tracks.t)[0]
+    return trace(start_simulator(scenario), start, tracks.particle, tracks.t)[0]
 
 
 def trace(sim: Simulator, start: np.ndarray, particle: np.ndarray, t: np.ndarray,
@@ -90,13 +88,18 @@ def residuals_of(spec: FitSpec, values: np.ndarray) -> np.ndarray:
     Exits: angle and time differences over their sigmas (:meth:`Exits.residuals`).
     """
     scenario = scenario_from_mapping(spec.scenario_mapping(values), spec.base_dir)
-    exits = spec.exits
-    if exits is not None:
-        angle, t = simulate_exits(scenario)
-        return exits.residuals(angle, t, scenario.duration, spec.exit_sigma)[0]
+    if spec.exits is not None:
+        return exit_residuals(spec, scenario)[0]
     tracks = spec.tracks
     diff = predict(scenario, tracks) - tracks.xyz
     return diff[:, :3 if tracks.has_z else 2].reshape(-1)
+
+
+def exit_residuals(spec: FitSpec, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """Return the exits' residuals (1) in ``scenario`` and the piece of each."""
+    assert spec.exits is not None
+    angle, t = simulate_exits(scenario)
+    return spec.exits.residuals(angle, t, scenario.duration, spec.exit_sigma)
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,11 +163,8 @@ class FitProblem:
         """Return the root mean square residual of each piece (m; exits: in sigmas)."""
         exits = self.spec.exits
         if exits is not None:
-            scenario = self.scenario(values)
             self.count(1)
-            angle, t = simulate_exits(scenario)
-            residuals, owner = exits.residuals(angle, t, scenario.duration,
-                                               self.spec.exit_sigma)
+            residuals, owner = exit_residuals(self.spec, self.scenario(values))
             return {int(p): float(np.sqrt(np.mean(residuals[owner == p] ** 2)))
                     for p in exits.particle}
         rows = self.residuals(values).reshape(len(self.spec.tracks), self._columns)

@@ -53,6 +53,7 @@ from .jacobian import Mapper
 from .problem import trace
 from .spec import FitSpec
 from .tracks import Tracks
+from ..feeder.runner import start_simulator
 from ..feeder.scenario import Scenario
 from ..physics.params import product_row
 from ..physics.simulation import (
@@ -168,16 +169,13 @@ class WindowRun:
         k, scenario, start = task
         windows, tracks = self.windows, self.spec.tracks
         t0, t1 = windows.edges[k], windows.edges[k + 1]
-        params = SimParams(model=scenario.model, solver=scenario.solver)
-        profile = scenario.rotation
-        sim = Simulator(params, profile, t0)
         ids = windows.pieces[k]
         if k == 0:
-            for spec in scenario.particles:
-                sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
-                        [spec.product])
+            sim = start_simulator(scenario)
             where = np.array([spec.position for spec in scenario.particles], dtype=float)
         else:
+            params = SimParams(model=scenario.model, solver=scenario.solver)
+            sim = Simulator(params, scenario.rotation, t0)
             where = np.zeros((len(scenario.particles), 3))
             if len(ids):
                 sim.state = self._state(scenario, params, sim.state, ids, start)
@@ -227,12 +225,13 @@ class Shooting:
     """
     The multiple-shooting residuals and their Jacobian over z = (θ, the windows' starts).
 
-    values: θ -> the free keys' values; scenario: values -> Scenario; gap_weight: the weight
-    of a continuity gap against a track residual.
+    scenario: values -> Scenario; values: θ -> the free keys' values; start: the scenario at
+    the start values (its masses weigh the gaps; whether its pieces touch groups the
+    Jacobian's differences).
     """
 
     def __init__(self, spec: FitSpec, windows: Windows, scenario: Any, values: Any,
-                 mapper: Mapper = map) -> None:
+                 start: Scenario, mapper: Mapper = map) -> None:
         """Keep the fit and its windows; no simulation runs yet."""
         self.spec = spec
         self.windows = windows
@@ -247,11 +246,12 @@ class Shooting:
         self.sizes[0] = 0
         self.offsets = np.concatenate([[0], np.cumsum(self.sizes)]) + self.params
         segment = float(np.diff(windows.edges).mean())
-        masses = np.array([piece.product.m for piece in self.spec_scenario.particles])
+        self.interact = start.model.interactions.enabled
+        masses = np.array([piece.product.m for piece in start.particles])
         self.gap_scales = [np.array([[1.0, 1.0, segment, segment, w, w]
                                      for w in segment ** 2 / (2.0 * masses[gap])])
                            for gap in windows.gaps]
-        self._cache: tuple[bytes, list[tuple[np.ndarray, np.ndarray]]] | None = None
+        self._cache: tuple[bytes, Scenario, list[tuple[np.ndarray, np.ndarray]]] | None = None
         data = [len(rows) * self.columns for rows in windows.rows]
         self._data_offsets = np.concatenate([[0], np.cumsum(data)])
         gaps = [len(g) * UNKNOWNS for g in windows.gaps]
@@ -259,19 +259,20 @@ class Shooting:
         self.size = int(self._gap_offsets[-1])
 
     def starts(self, z: np.ndarray) -> list[np.ndarray]:
-        """Return each window's start unknowns (pieces, 4) in z."""
+        """Return each window's start unknowns (pieces, 6) in z."""
         return [z[self.offsets[k]:self.offsets[k + 1]].reshape(-1, UNKNOWNS)
                 for k in range(self.windows.count)]
 
-    def _evaluate(self, z: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    def _evaluate(self, z: np.ndarray) -> tuple[Scenario, list[tuple[np.ndarray, np.ndarray]]]:
+        """Return the scenario at z's θ and every window's run (the last z's are kept)."""
         key = z.tobytes()
         if self._cache is None or self._cache[0] != key:
             scenario = self._scenario(self._values(z[:self.params]))
             starts = self.starts(z)
             tasks = [(k, scenario, starts[k]) for k in range(self.windows.count)]
-            self._cache = (key, list(self.mapper(self.run_window, tasks)))
+            self._cache = (key, scenario, list(self.mapper(self.run_window, tasks)))
             self.simulations += len(tasks)
-        return self._cache[1]
+        return self._cache[1], self._cache[2]
 
     def _gaps(self, outputs: list[tuple[np.ndarray, np.ndarray]],
               starts: list[np.ndarray]) -> np.ndarray:
@@ -285,13 +286,13 @@ class Shooting:
 
     def residuals(self, z: np.ndarray) -> np.ndarray:
         """Return the track residuals of every window (m), then the weighed gaps (m)."""
-        outputs = self._evaluate(z)
+        outputs = self._evaluate(z)[1]
         return np.concatenate([*(out[0] for out in outputs),
                                self._gaps(outputs, self.starts(z))])
 
     def jacobian(self, z: np.ndarray, theta_steps: np.ndarray) -> np.ndarray:
         """Return the Jacobian (size, len(z)) by forward differences, windows side by side."""
-        base = self._evaluate(z)
+        scenario0, base = self._evaluate(z)
         f0 = self.residuals(z)
         jac = np.zeros((self.size, len(z)))
         count = self.windows.count
@@ -301,10 +302,9 @@ class Shooting:
             theta = np.array(z[:self.params])
             theta[j] += h
             variants.append((self._scenario(self._values(theta)), starts))
-        interact = self.spec_scenario.model.interactions.enabled
         slots = max((len(p) for p in self.windows.pieces[1:]), default=0)
-        groups = [(c, s) for c in range(UNKNOWNS) for s in (range(slots) if interact else [-1])]
-        scenario0 = self._scenario(self._values(z[:self.params]))
+        groups = [(c, s) for c in range(UNKNOWNS)
+                  for s in (range(slots) if self.interact else [-1])]
         for c, s in groups:
             moved = [block.copy() for block in starts]
             for k in range(1, count):
@@ -325,20 +325,14 @@ class Shooting:
             at += count
             jac[:, j] = (np.concatenate([*(out[0] for out in moved_outputs),
                                          self._gaps(moved_outputs, starts)]) - f0) / h
-        for g, (c, s) in enumerate(groups):
+        for c, s in groups:
             moved_outputs = [base[0], *outputs[at:at + count - 1]]
             at += count - 1
-            blocks = variants[len(theta_steps) + g][1]
-            self._unknown_columns(jac, base, moved_outputs, starts, blocks, c, s)
+            self._unknown_columns(jac, base, moved_outputs, c, s)
         return jac
 
-    @property
-    def spec_scenario(self) -> Scenario:
-        """Return the scenario at the fit's start values."""
-        return self._scenario(np.array(self.spec.start))
-
-    def _unknown_columns(self, jac: np.ndarray, base: list, moved: list, starts: list,
-                         blocks: list, c: int, s: int) -> None:
+    def _unknown_columns(self, jac: np.ndarray, base: list, moved: list, c: int,
+                         s: int) -> None:
         """Write the columns of unknown ``c`` of slot ``s`` (all pieces: -1) of each window."""
         windows, tracks = self.windows, self.spec.tracks
         step = STEPS[c]

@@ -177,12 +177,11 @@ def _multiple_shooting(problem: FitProblem, values: Any, theta0: np.ndarray, lb:
     """Return θ from a multiple-shooting fit started at θ0 (:mod:`shooting`)."""
     spec = problem.spec
     assert spec.segments is not None
-    windows = split(spec.tracks, len(problem.scenario(values(theta0)).particles),
-                    spec.segments)
-    shooting = Shooting(spec, windows, problem.scenario, values, mapper)
+    start = problem.scenario(values(theta0))
+    windows = split(spec.tracks, len(start.particles), spec.segments)
+    shooting = Shooting(spec, windows, problem.scenario, values, start, mapper)
     z0 = np.concatenate([theta0, *(block.reshape(-1)
-                                   for block in initial_starts(spec.tracks, windows,
-                                                               problem.scenario(values(theta0))))])
+                                   for block in initial_starts(spec.tracks, windows, start))])
     n = len(theta0)
     free = np.full(len(z0) - n, np.inf)
     result = least_squares(

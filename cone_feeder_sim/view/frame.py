@@ -44,9 +44,14 @@ PALETTE = ((214, 39, 40), (31, 119, 180), (44, 160, 44), (255, 127, 14), (148, 1
            (140, 86, 75), (227, 119, 194), (23, 190, 207))
 
 
+def pixels_per_metre(radius: float, size: int) -> float:
+    """Return the scale of a picture of ``size`` whose rim (radius, m) is at RIM_SHARE."""
+    return RIM_SHARE * 0.5 * size / radius
+
+
 def pixel_of(x: Any, y: Any, radius: float, size: int) -> tuple[Any, Any]:
     """Return the (row, column) of the world point (x, y) (m) in a picture of ``size``."""
-    scale = RIM_SHARE * 0.5 * size / radius
+    scale = pixels_per_metre(radius, size)
     return 0.5 * size - y * scale, 0.5 * size + x * scale
 
 
@@ -61,7 +66,7 @@ def top_view(positions: np.ndarray, radii: np.ndarray, kinds: np.ndarray, radius
     cone's angle phi.
     """
     image = _background(size, float(radius), channels.count, float(channels.boundary)).copy()
-    scale = RIM_SHARE * 0.5 * size / radius
+    scale = pixels_per_metre(radius, size)
     along = np.linspace(0.6 * radius, radius, max(2, int(0.8 * radius * scale)))
     for side in (-0.5, 0.5):  # the mark: a radial line two pixels wide at the angle phi
         row, column = pixel_of(along * math.cos(angle) - side / scale * math.sin(angle),
@@ -88,7 +93,7 @@ def _background(size: int, radius: float, count: int, boundary: float) -> np.nda
     image = np.empty((size, size, 3), dtype=np.uint8)
     image[:] = BACKGROUND
     rows, columns = np.mgrid[0:size, 0:size] + 0.5
-    scale = RIM_SHARE * 0.5 * size / radius
+    scale = pixels_per_metre(radius, size)
     x = (columns - 0.5 * size) / scale
     y = (0.5 * size - rows) / scale
     rho = np.hypot(x, y)

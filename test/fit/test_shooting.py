@@ -78,7 +78,7 @@ def test_the_jacobian_window_by_window_equals_column_by_column(contact: bool) ->
     scenario = scenario_from_mapping(mapping)
     with ThreadPoolExecutor(2) as pool:
         shooting = Shooting(spec, windows, lambda v: scenario_from_mapping(
-            spec.scenario_mapping(v)), np.exp, pool.map)
+            spec.scenario_mapping(v)), np.exp, scenario, pool.map)
         starts = initial_starts(tracks, windows, scenario)
         z = np.concatenate([[np.log(250.0)], *(b.reshape(-1) for b in starts)])
         theta_steps = forward_steps(z[:1], 1e-3, np.log([10.0]), np.log([1000.0]))
