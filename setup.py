@@ -27,7 +27,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.json')
+         + glob('config/*.csv')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
     # The ROS 2 Python packages (rclpy, message packages) come from the ROS installation
@@ -36,8 +37,10 @@ setup(
     install_requires=['setuptools', 'numpy>=1.23.2', 'numba>=0.57', 'pyyaml>=6.0',
                       'mcap>=1.6.0', 'rosbags>=0.10.8', 'matplotlib>=3.6', 'scipy>=1.9.2'],
     # `cone-feeder-sim sweep` runs on Dask (dask.distributed); only the sweep needs it.
+    # `run --view` and the RL environment's render_mode 'human' serve a live Foxglove view.
     extras_require={'sweep': ['dask[distributed]>=2024.1'],
-                    'rl': ['gymnasium>=1.0', 'stable-baselines3>=2.4']},
+                    'rl': ['gymnasium>=1.0', 'stable-baselines3>=2.4'],
+                    'view': ['foxglove-sdk>=0.30']},
     python_requires='>=3.11',
     zip_safe=True,
     maintainer='cone_feeder_sim maintainers',

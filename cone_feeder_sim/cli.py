@@ -21,7 +21,10 @@ The command line: `cone-feeder-sim run`, `report` and `recover`.
 
 `run` appends every exit to the CSV as its output interval ends (flushed). SIGINT (Ctrl-C)
 or SIGTERM ends it cleanly after the current interval: the CSV keeps the exits so far, the
-MCAP file is closed complete, and one line says where the run stopped.
+MCAP file is closed complete, and one line says where the run stopped. With `--view` the
+run is served live on a Foxglove WebSocket (:mod:`cone_feeder_sim.view.live`), paced to
+`--speed` simulated seconds per second; the view stays up after the run's end until Ctrl-C
+(exit code 0 then), and the files are the same as without it.
 
 Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors; 130 (SIGINT) or
 143 (SIGTERM), i.e. 128 + the signal number as a shell reports it, for an interrupted run.
@@ -29,6 +32,7 @@ Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors; 130 
 
 import argparse
 from collections.abc import Callable, Sequence
+import contextlib
 import os
 from pathlib import Path
 import signal
@@ -40,11 +44,14 @@ from typing import Any, Self, TextIO
 
 from . import __version__
 from .errors import ConeFeederError
+from .feeder.runner import Progress
 from .feeder.scenario import Scenario
 from .formats.mcap_reader import recover_mcap
-from .formats.run_files import run_to_files
+from .formats.run_files import run_to_files, RunFiles
 from .formats.scenario_file import load_scenario
 from .physics.simulation import Simulator, StepResult, warm_up
+from .view.live import DEFAULT_FPS, DEFAULT_PORT, LiveView, RealTime
+from .weigher.machine import Weigher
 
 
 class ProgressBar:
@@ -164,6 +171,17 @@ def build_parser() -> argparse.ArgumentParser:
                           'section; weigher: {} is the default machine)')
     run.add_argument('--mcap', metavar='OUT.mcap',
                      help='also record the run to an MCAP file (the topics of sim_node)')
+    run.add_argument('--view', action='store_true',
+                     help='serve the run live on a Foxglove WebSocket, paced to real time, '
+                          'until Ctrl-C (needs foxglove-sdk: the [view] extra)')
+    run.add_argument('--port', type=int, default=None, metavar='PORT',
+                     help=f'--view: the WebSocket port (default {DEFAULT_PORT}; 0: any free '
+                          'one)')
+    run.add_argument('--speed', type=float, default=None, metavar='S',
+                     help='--view: simulated seconds per wall second (default 1; inf: as '
+                          'fast as possible)')
+    run.add_argument('--fps', type=float, default=None, metavar='HZ',
+                     help=f'--view: frames per second (default {DEFAULT_FPS:g})')
     report = sub.add_parser(
         'report', help='draw a one-page PNG report of a recorded run (MCAP file)')
     report.add_argument('mcap', help='MCAP file of a run (sim_node or the headless runner)')
@@ -215,8 +233,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def check_view_flags(args: argparse.Namespace) -> None:
+    """Refuse --port, --speed and --fps without --view, and values out of range."""
+    given = [f'--{name}' for name in ('port', 'speed', 'fps') if getattr(args, name) is not None]
+    if given and not args.view:
+        raise ConeFeederError(f'{", ".join(given)}: only with --view')
+    if args.port is not None and not 0 <= args.port <= 65535:
+        raise ConeFeederError(f'--port must be 0..65535, got {args.port}')
+    for name in ('speed', 'fps'):
+        value = getattr(args, name)
+        if value is not None and not value > 0.0:
+            raise ConeFeederError(f'--{name} must be > 0, got {value:g}')
+
+
 def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
     """Run a scenario, writing exits as they happen; return the exit code."""
+    check_view_flags(args)
     scenario: Scenario = load_scenario(args.scenario)
     check_writable(args.events)
     if args.packs is not None:
@@ -224,25 +256,51 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
             raise ConeFeederError(f'--packs needs a weigher: section in {args.scenario} '
                                   '(weigher: {} is the default machine)')
         check_writable(args.packs, 'the packs')
+    weigher = (Weigher(scenario.weigher, scenario.model.channels.count)
+               if scenario.weigher is not None else None)
     bar = None if args.quiet else ProgressBar(scenario.duration, err)
-    with StopOnSignals() as stop:
+    progress: list[Progress] = [bar] if bar is not None else []
+    with contextlib.ExitStack() as stack:
+        view = None
+        if args.view:  # before any file: a port in use stops here
+            view = stack.enter_context(LiveView(
+                scenario.model, weigher=weigher, fps=args.fps or DEFAULT_FPS,
+                port=DEFAULT_PORT if args.port is None else args.port))
+            err.write(f'live view on {view.url} (Foxglove: Open connection; panels: '
+                      'config/foxglove_layout.json)\n')
+            err.flush()
+            progress += [view, RealTime(args.speed or 1.0)]
+        stop = stack.enter_context(StopOnSignals())
         try:
             files = run_to_files(scenario, args.events, packs=args.packs, mcap=args.mcap,
-                                 source=args.scenario, progress=[bar] if bar else [],
-                                 stop=stop)
+                                 source=args.scenario, progress=progress, stop=stop,
+                                 weigher=weigher)
         finally:
             if bar is not None:
                 bar.end()
+        code = report_run(args, files, stop.signum, err)
+        if view is not None and stop.signum is None:
+            err.write(f'the run ended at t = {files.result.end_time:.3f} s; the live view '
+                      f'stays on {view.url} until Ctrl-C\n')
+            err.flush()
+            while not stop():
+                time.sleep(0.1)
+    return code
+
+
+def report_run(args: argparse.Namespace, files: RunFiles, signum: int | None,
+               err: TextIO) -> int:
+    """Write what a run did (or where it was interrupted); return its exit code."""
     result = files.result
     for failure in result.failures:
         err.write(f'warning: particle {failure.particle_id} removed at t={failure.t:.6f} s: '
                   f'{failure.reason}\n')
     recorded = f', run recorded to {args.mcap}' if args.mcap else ''
-    if result.stopped and stop.signum is not None:
-        err.write(f'interrupted by {signal.Signals(stop.signum).name} at '
+    if result.stopped and signum is not None:
+        err.write(f'interrupted by {signal.Signals(signum).name} at '
                   f't = {result.end_time:.3f} s: {files.events} exits written to '
                   f'{args.events}{recorded}\n')
-        return 128 + stop.signum
+        return 128 + signum
     err.write(f'{files.events} of {result.pieces} pieces left the cone; '
               f'{result.remaining_ids.size} still on it, {len(result.failures)} failed; '
               f'events written to {args.events}\n')

@@ -49,3 +49,7 @@ class SweepError(ConeFeederError, ValueError):
 
 class EnvConfigError(ConeFeederError, ValueError):
     """A reinforcement-learning environment's configuration is malformed (the key is named)."""
+
+
+class ViewError(ConeFeederError):
+    """The live view cannot start: foxglove-sdk is not installed, or its port is taken."""

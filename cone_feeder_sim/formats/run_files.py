@@ -47,18 +47,22 @@ class RunFiles:
 def run_to_files(scenario: Scenario, events: str | Path, *, packs: str | Path | None = None,
                  mcap: str | Path | None = None, source: str = '',
                  progress: Sequence[Progress] = (),
-                 stop: Callable[[], bool] | None = None) -> RunFiles:
+                 stop: Callable[[], bool] | None = None,
+                 weigher: Weigher | None = None) -> RunFiles:
     """
     Run a validated scenario, appending its exits to the events CSV as they happen.
 
     packs: the packs CSV, written at the end (the scenario needs a weigher); mcap: an MCAP
     recording of the run (source: the scenario's file name in its metadata); progress:
     callbacks after every output interval, after the events are written; stop: the
-    runner's stop predicate (the files then hold the run so far).
+    runner's stop predicate (the files then hold the run so far); weigher: the machine to
+    drive when the scenario has one (default: a new one; a progress callback may watch it).
     """
     with contextlib.ExitStack() as outputs:
-        weigher = (Weigher(scenario.weigher, scenario.model.channels.count)
-                   if scenario.weigher is not None else None)
+        if scenario.weigher is None:
+            weigher = None
+        elif weigher is None:
+            weigher = Weigher(scenario.weigher, scenario.model.channels.count)
         callbacks: list[Progress] = []
         if mcap is not None:
             callbacks.append(outputs.enter_context(contextlib.closing(ScenarioRecorder(

@@ -79,6 +79,7 @@ from ..feeder.engine import ChannelFeed, FeederEngine, TickResult
 from ..physics.params import P_M, P_S0
 from ..physics.simulation import world_from_cone
 from ..view.frame import top_view
+from ..view.live import DEFAULT_PORT, LiveView, RealTime
 
 __all__ = ['ConeFeederEnv']
 
@@ -99,19 +100,22 @@ class ConeFeederEnv(gymnasium.Env):
     config: the configuration: None (``config/rl.yaml``), the path of a YAML file with
     keys of ``config/rl.yaml`` (the rest keep the defaults), a mapping of such keys,
     or an :class:`~cone_feeder_sim.rl.config.EnvConfig`.
-    render_mode: None, or 'rgb_array': :meth:`render` returns a top view of the cone
-    (FRAME_SIZE x FRAME_SIZE x 3 uint8, :func:`~cone_feeder_sim.view.frame.top_view`).
-    'human' (the live view) is not there yet.
+    render_mode: None; 'rgb_array': :meth:`render` returns a top view of the cone
+    (FRAME_SIZE x FRAME_SIZE x 3 uint8, :func:`~cone_feeder_sim.view.frame.top_view`);
+    'human': the episodes are served live on a Foxglove WebSocket
+    (:class:`~cone_feeder_sim.view.live.LiveView`, needs foxglove-sdk) on ``view_port``
+    (0: any free one; :attr:`view`), paced to real time; :meth:`close` stops it.
     **overrides: keys of ``config/rl.yaml`` merged over ``config`` (sections key by
     key), e.g. ``episode_time=10.0, interactions={'enabled': True}``.
 
     Raises EnvConfigError naming the key of a bad configuration.
     """
 
-    metadata: dict[str, Any] = {'render_modes': ['rgb_array']}
+    metadata: dict[str, Any] = {'render_modes': ['rgb_array', 'human']}
 
     def __init__(self, config: str | Path | Mapping[str, Any] | EnvConfig | None = None,
-                 render_mode: str | None = None, **overrides: Any) -> None:
+                 render_mode: str | None = None, *, view_port: int = DEFAULT_PORT,
+                 **overrides: Any) -> None:
         """Validate the configuration and build the spaces; the engine starts at reset."""
         if isinstance(config, EnvConfig):
             if overrides:
@@ -121,9 +125,13 @@ class ConeFeederEnv(gymnasium.Env):
             self.config = load_env_config(config, overrides)
         if render_mode not in (None, *self.metadata['render_modes']):
             raise EnvConfigError(f'render_mode {render_mode!r} is not available; render '
-                                 f'modes: {", ".join(self.metadata["render_modes"])} (the '
-                                 'live view, human, is not there yet)')
+                                 f'modes: {", ".join(self.metadata["render_modes"])}')
         self.render_mode = render_mode
+        self.view: LiveView | None = None
+        if render_mode == 'human':
+            self.view = LiveView(self.config.engine.model, port=view_port)
+        self._pace = RealTime(1.0)
+        self._results: list[TickResult] = []
         self.metadata = {**self.metadata, 'render_fps': 1.0 / self.config.control_period}
         self.observation_space = observation_space(self.config)
         self.action_space = action_space(self.config)
@@ -173,6 +181,11 @@ class ConeFeederEnv(gymnasium.Env):
         self._t0 = engine.t
         self._mass0 = engine.channel_mass
         self._packs0 = 0
+        if self.view is not None:
+            self.view.watch(engine)
+            self._pace = RealTime(1.0)
+            self._results = []
+            self.render()
         return self._observation(), self._info(np.zeros(3), 0, 0.0, 0, 0)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
@@ -196,6 +209,9 @@ class ConeFeederEnv(gymnasium.Env):
         exits = sum(len(result.exits) for result in results)
         failures = sum(len(result.failures) for result in results)
         self._steps += 1
+        if self.render_mode == 'human':
+            self._results = results
+            self.render()
         terms = self._reward_terms(packs, giveaway)
         truncated = self._steps >= self.config.episode_steps
         info = self._info(terms, packs, giveaway, exits, failures)
@@ -229,7 +245,17 @@ class ConeFeederEnv(gymnasium.Env):
     # ------------------------------------------------------------------ observations
 
     def render(self) -> np.ndarray | None:
-        """Return the top view (FRAME_SIZE, FRAME_SIZE, 3) uint8 with 'rgb_array', else None."""
+        """
+        Return the top view (FRAME_SIZE, FRAME_SIZE, 3) uint8 with 'rgb_array', else None.
+
+        With 'human' it shows the state on the live view and waits for the wall clock
+        (called by reset and step).
+        """
+        if self.view is not None:
+            self.view.ticked(self.engine, self._results)
+            self._results = []
+            self._pace(self.engine.t)
+            return None
         if self.render_mode != 'rgb_array':
             return None
         engine = self.engine
@@ -238,6 +264,12 @@ class ConeFeederEnv(gymnasium.Env):
         positions = world_from_cone(state.y, engine.angle, engine.omega)[0][:, :2]
         return top_view(positions, state.products[:, P_S0], np.zeros(state.count, dtype=int),
                         model.r, model.channels, engine.angle, FRAME_SIZE)
+
+    def close(self) -> None:
+        """Stop the live view of render_mode 'human' (nothing else to release)."""
+        if self.view is not None:
+            self.view.close()
+        super().close()
 
     def features(self) -> np.ndarray:
         """Return the feature vector (F,) float32 of the current state (see the module)."""

@@ -16,6 +16,15 @@
 Seeing the feeder without ROS.
 
 ``frame`` draws a top view of the cone as an RGB array with numpy alone (no display, no
-matplotlib): what the RL environment's ``render_mode="rgb_array"`` returns. The live
-Foxglove view (issue 22) is still to come.
+matplotlib): what the RL environment's ``render_mode="rgb_array"`` returns. ``live`` serves
+a run on a Foxglove WebSocket (:class:`LiveView`, the optional extra ``[view]``:
+foxglove-sdk): ``cone-feeder-sim run --view``, the RL environment's ``"human"`` mode.
+``snapshot`` takes what a view shows from the runner or the engine; ``scene`` builds the
+Foxglove messages; ``topics`` is the view's topic table; ``layout`` its Foxglove layout.
 """
+
+from .frame import top_view
+from .live import LiveView, RealTime
+from .snapshot import Snapshot
+
+__all__ = ['LiveView', 'RealTime', 'Snapshot', 'top_view']

@@ -1,0 +1,247 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The live view: a Foxglove WebSocket server that shows a run as it goes, without ROS.
+
+:class:`LiveView` serves the topics of :data:`~cone_feeder_sim.view.topics.VIEW_TOPICS` with
+foxglove-sdk (the optional extra ``[view]``). The simulation hands it snapshots (as the
+runner's progress callback, after the engine's ticks, or with :meth:`LiveView.show`); its
+own thread publishes the newest one at a steady frame rate (``fps``, wall clock), whatever
+the tick rate, with the exits and packs since the last frame as log lines. The simulation
+only copies its state into a snapshot; it never waits for a client, and a client that
+connects late, or vanishes, changes nothing in the run. Open it in Foxglove with
+"Open connection", ``ws://HOST:PORT`` (config/foxglove_layout.json arranges the panels).
+
+:class:`RealTime` paces a loop to the wall clock (``speed`` simulated seconds per second).
+"""
+
+from collections.abc import Sequence
+import importlib
+import json
+import threading
+import time
+from types import ModuleType, TracebackType
+from typing import Any, Self
+
+from .snapshot import Event, Snapshot, Watcher
+from .topics import JSON_SCHEMAS, VIEW_TOPICS
+from ..errors import ViewError
+from ..feeder.engine import FeederEngine, TickResult
+from ..formats.messages import stamp_ns
+from ..physics.params import ModelParams
+from ..physics.simulation import Simulator, StepResult
+from ..weigher.machine import Weigher
+
+__all__ = ['DEFAULT_FPS', 'DEFAULT_PORT', 'INSTALL_HINT', 'LiveView', 'RealTime',
+           'require_sdk']
+
+#: Foxglove's default WebSocket port.
+DEFAULT_PORT = 8765
+#: Frames per second (wall clock) the view publishes by default.
+DEFAULT_FPS = 30.0
+#: How to install what the live view needs.
+INSTALL_HINT = ('the live view needs foxglove-sdk: pip install "foxglove-sdk>=0.30" (the '
+                '[view] extra of cone_feeder_sim)')
+
+
+def require_sdk() -> ModuleType:
+    """Return the foxglove module; raise ViewError with the install hint without it."""
+    try:
+        return importlib.import_module('foxglove')
+    except ImportError:
+        raise ViewError(INSTALL_HINT) from None
+
+
+class RealTime:
+    """
+    Paces a loop to the wall clock: call it with the simulation time after every step.
+
+    It sleeps until ``t / speed`` wall seconds have passed since its first call (the
+    anchor); ``speed`` inf never sleeps. A step that ran late is not made up by bunching
+    the next ones: the anchor moves so that the loop is never more than one call behind.
+    Usable as the runner's progress callback.
+    """
+
+    def __init__(self, speed: float = 1.0) -> None:
+        """Pace at ``speed`` simulated seconds per wall second (> 0; inf: no pacing)."""
+        if not speed > 0.0:
+            raise ValueError(f'speed must be > 0 (inf: as fast as possible), got {speed}')
+        self.speed = float(speed)
+        self._anchor: tuple[float, float] | None = None
+
+    def __call__(self, t: float, *_: Any) -> None:
+        """Wait until the wall clock reaches simulation time t (s)."""
+        if self.speed == float('inf'):
+            return
+        now = time.monotonic()
+        if self._anchor is None:
+            self._anchor = (now, t)
+            return
+        wall0, t0 = self._anchor
+        due = wall0 + (t - t0) / self.speed
+        if due > now:
+            time.sleep(due - now)
+        else:
+            self._anchor = (now, t)  # behind: go on from here, do not bunch
+
+
+class LiveView:
+    """
+    A Foxglove WebSocket server showing one run live.
+
+    source: the engine to watch (its model and weigher) or the run's model. weigher: the
+    machine the headless runner drives (its hopper readings and packs; ignored with an
+    engine). port: the TCP port (0: any free one, see :attr:`port`); host: the address to
+    bind (default this machine only). fps: frames per wall second. Raises ViewError when
+    foxglove-sdk is missing or the port cannot be bound; nothing is served then.
+
+    Use it as a context manager or call :meth:`close`. Feed it with :meth:`__call__` (the
+    runner's progress callback), :meth:`ticked` (after engine ticks) or :meth:`show`.
+    Counters for benchmarks: ``frames`` published, ``publish_seconds`` spent publishing
+    (wall, on the view's thread), ``frame_times`` (monotonic s) of the last 1,000 frames.
+    """
+
+    def __init__(self, source: FeederEngine | ModelParams, *, weigher: Weigher | None = None,
+                 port: int = DEFAULT_PORT, host: str = '127.0.0.1',
+                 fps: float = DEFAULT_FPS, name: str = 'cone_feeder_sim') -> None:
+        """Start the server and the frame thread."""
+        if not fps > 0.0:
+            raise ViewError(f'the live view needs fps > 0, got {fps}')
+        sdk = require_sdk()
+        from . import scene  # needs foxglove-sdk
+        self.watch(source, weigher)
+        self._messages = scene
+        self._scene = scene.SceneBuilder(self._model)
+        self._context = sdk.Context()
+        try:
+            self._server = sdk.start_server(
+                name=name, host=host, port=port, context=self._context,
+                capabilities=[sdk.Capability.Time])
+        except RuntimeError as exc:
+            raise ViewError(f'cannot serve the live view on {host}:{port}: {exc}') from None
+        self._channels: dict[str, Any] = {
+            'scene': sdk.channels.SceneUpdateChannel(VIEW_TOPICS['scene'].name,
+                                                     context=self._context),
+            'events': sdk.channels.LogChannel(VIEW_TOPICS['events'].name,
+                                              context=self._context)}
+        for key, schema in JSON_SCHEMAS.items():
+            self._channels[key] = sdk.Channel(VIEW_TOPICS[key].name, schema=schema,
+                                              message_encoding='json',
+                                              context=self._context)
+        self.host = host
+        self._port = int(self._server.port)
+        self.period = 1.0 / fps
+        self.frames = 0
+        self.publish_seconds = 0.0
+        self.frame_times: list[float] = []
+        self._lock = threading.Lock()
+        self._latest: Snapshot | None = None
+        self._events: list[Event] = []
+        self._sent: Snapshot | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name='live-view', daemon=True)
+        self._thread.start()
+
+    @property
+    def port(self) -> int:
+        """Return the TCP port the server listens on."""
+        return self._port
+
+    @property
+    def url(self) -> str:
+        """Return the address to open in Foxglove (Open connection, Foxglove WebSocket)."""
+        return f'ws://{self.host}:{self.port}'
+
+    # ------------------------------------------------------------------ feeding it
+
+    def watch(self, source: FeederEngine | ModelParams, weigher: Weigher | None = None
+              ) -> None:
+        """Watch a new run from its start (an RL episode's new engine) of the same model."""
+        model = source.model if isinstance(source, FeederEngine) else source
+        if isinstance(source, FeederEngine):
+            weigher = source.weigher
+        self._model = model
+        self._watcher = Watcher(model, weigher)
+
+    def show(self, snapshot: Snapshot, events: Sequence[Event] = ()) -> None:
+        """Hand over the newest snapshot and the events since the last one (never blocks)."""
+        with self._lock:
+            self._latest = snapshot
+            self._events.extend(events)
+
+    def __call__(self, t: float, sim: Simulator, step: StepResult) -> None:
+        """Show the runner's interval that ended at t (s): the runner's progress callback."""
+        self.show(*self._watcher.interval(t, sim, step))
+
+    def ticked(self, engine: FeederEngine, results: Sequence[TickResult] = ()) -> None:
+        """Show the engine now, with the exits and packs of its ticks ``results``."""
+        self.show(*self._watcher.ticks(engine, results))
+
+    # ------------------------------------------------------------------ publishing
+
+    def _run(self) -> None:
+        due = time.monotonic()
+        while not self._stop.wait(max(0.0, due - time.monotonic())):
+            self._frame()
+            due += self.period
+            now = time.monotonic()
+            if due < now - self.period:  # a frame ran late: keep the rate, drop the lag
+                due = now
+        self._frame()  # the last state, as the run left it
+
+    def _frame(self) -> None:
+        with self._lock:
+            snapshot, events = self._latest, self._events
+            self._events = []
+        if snapshot is None or (snapshot is self._sent and not events):
+            return
+        start = time.monotonic()
+        for event in events:
+            self._channels['events'].log(self._messages.log_message(event),
+                                         log_time=stamp_ns(event.t))
+        if snapshot is not self._sent:
+            self._publish(snapshot)
+            self._sent = snapshot
+            self.frames += 1
+            self.frame_times.append(start)
+            del self.frame_times[:-1000]
+        self.publish_seconds += time.monotonic() - start
+
+    def _publish(self, snapshot: Snapshot) -> None:
+        t_ns = stamp_ns(snapshot.t)
+        self._channels['scene'].log(self._scene.update(snapshot), log_time=t_ns)
+        for key, message in self._messages.series_messages(snapshot).items():
+            # Serialized here: the SDK's own JSON encoding keeps only float32's digits.
+            self._channels[key].log(json.dumps(message).encode(), log_time=t_ns)
+        self._server.broadcast_time(t_ns)
+
+    # ------------------------------------------------------------------ ending
+
+    def close(self) -> None:
+        """Publish the last snapshot, stop the frame thread and the server; idempotent."""
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._thread.join()
+        self._server.stop()
+
+    def __enter__(self) -> Self:
+        """Return the view."""
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        """Close the view."""
+        self.close()

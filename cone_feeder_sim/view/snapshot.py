@@ -1,0 +1,171 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+What a view shows at one moment, taken from the headless runner or the engine.
+
+A :class:`Snapshot` is a copy of the state that a view draws later, on its own thread:
+the pieces in the world frame, the cone's angle and speed, the channel masses and the
+hopper readings. :class:`Watcher` takes snapshots from the runner's progress callback or
+from the engine's ticks and turns exits and packs into :class:`Event` lines. Pure numpy;
+no viewer library.
+"""
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..feeder.engine import FeederEngine, TickResult
+from ..physics.params import ModelParams, P_S0
+from ..physics.simulation import ExitEvents, Simulator, StepResult, world_from_cone
+from ..weigher.machine import Pack, Weigher
+
+__all__ = ['Event', 'ProductKinds', 'Snapshot', 'Watcher', 'touching_pairs']
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """
+    The feeder at simulation time t (s).
+
+    angle (rad) the cone's angle phi; omega (rad/s) its speed; ids (N,) int64 the pieces'
+    ids; positions (N, 3) m in the world frame; radii (N,) m their outer radius s0; kinds
+    (N,) int a product index per piece (stable over a run: the colour); contacts (K, 2) int
+    the index pairs of touching pieces (empty without contact between pieces);
+    channel_mass (C,) kg the mass each channel received; hoppers (H,) kg the weigh
+    hoppers' readings, None without a weigher.
+    """
+
+    t: float
+    angle: float
+    omega: float
+    ids: np.ndarray
+    positions: np.ndarray
+    radii: np.ndarray
+    kinds: np.ndarray
+    contacts: np.ndarray
+    channel_mass: np.ndarray
+    hoppers: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Event:
+    """A line for the event log: at t (s), ``text``; ``kind`` 'exit' or 'pack'."""
+
+    t: float
+    kind: str
+    text: str
+
+
+def touching_pairs(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Return the index pairs (K, 2), i < j, of pieces closer than the sum of their radii."""
+    count = positions.shape[0]
+    if count < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    first, second = np.triu_indices(count, 1)
+    gap = np.linalg.norm(positions[first] - positions[second], axis=1)
+    near = gap < radii[first] + radii[second]
+    return np.stack([first[near], second[near]], axis=1).astype(np.int64)
+
+
+class ProductKinds:
+    """A product index per piece, by its product row, in order of first appearance."""
+
+    def __init__(self) -> None:
+        """Start with no products seen."""
+        self._index: dict[bytes, int] = {}
+
+    def __call__(self, products: np.ndarray) -> np.ndarray:
+        """Return the index (N,) int of each row of products (N, PRODUCT_WIDTH)."""
+        if products.shape[0] == 0:
+            return np.zeros(0, dtype=np.int64)
+        rows, inverse = np.unique(products, axis=0, return_inverse=True)
+        known = np.array([self._index.setdefault(row.tobytes(), len(self._index))
+                          for row in rows], dtype=np.int64)
+        return known[inverse.reshape(-1)]
+
+
+def exit_events(exits: ExitEvents) -> list[Event]:
+    """Return a line per piece that left: its id, channel, angle and mass."""
+    return [Event(float(t), 'exit', f'piece {int(i)} left into channel {int(c)} at '
+                                    f'{float(a):.1f} deg ({1e3 * float(m):.0f} g)')
+            for i, t, c, a, m in zip(exits.ids, exits.t, exits.channel, exits.angle_deg,
+                                     exits.mass)]
+
+
+def pack_events(packs: Sequence[Pack]) -> list[Event]:
+    """Return a line per pack: its index, mass, giveaway and heads."""
+    return [Event(pack.t, 'pack', f'pack {pack.index}: {1e3 * pack.mass:.1f} g (giveaway '
+                                  f'{1e3 * pack.giveaway:+.1f} g), heads '
+                                  f'{", ".join(str(h) for h in pack.heads)}')
+            for pack in packs]
+
+
+class Watcher:
+    """
+    Takes snapshots and events from a run: the runner's intervals or the engine's ticks.
+
+    model: the run's model (the channel count, whether pieces touch); weigher: the
+    machine the runner drives, for its hopper readings and packs (None: none).
+    """
+
+    def __init__(self, model: ModelParams, weigher: Weigher | None = None) -> None:
+        """Start at the beginning of a run: no channel mass, no packs seen."""
+        self._contacts = model.interactions.enabled
+        self._weigher = weigher
+        self._kinds = ProductKinds()
+        self._channel_mass = np.zeros(model.channels.count)
+        self._packs_seen = 0
+
+    def _snapshot(self, t: float, angle: float, omega: float, ids: np.ndarray,
+                  positions: np.ndarray, products: np.ndarray, channel_mass: np.ndarray,
+                  hoppers: np.ndarray | None) -> Snapshot:
+        radii = products[:, P_S0].copy()
+        contacts = (touching_pairs(positions, radii) if self._contacts
+                    else np.zeros((0, 2), dtype=np.int64))
+        return Snapshot(t=float(t), angle=float(angle),
+                        omega=float(omega), ids=ids.copy(), positions=positions.copy(),
+                        radii=radii, kinds=self._kinds(products), contacts=contacts,
+                        channel_mass=channel_mass.copy(),
+                        hoppers=None if hoppers is None else hoppers.copy())
+
+    def interval(self, t: float, sim: Simulator, step: StepResult
+                 ) -> tuple[Snapshot, list[Event]]:
+        """Return the snapshot and events of the runner's interval that ended at t (s)."""
+        exits = step.exits
+        if len(exits):
+            np.add.at(self._channel_mass, exits.channel - 1, exits.mass)
+        state = sim.state
+        positions = world_from_cone(state.y, state.angle, sim.omega())[0]
+        events = exit_events(exits)
+        hoppers = None
+        if self._weigher is not None:
+            hoppers = self._weigher.hopper_readings()
+            events += pack_events(self._weigher.packs[self._packs_seen:])
+            self._packs_seen = len(self._weigher.packs)
+        return self._snapshot(t, state.angle, sim.omega(), state.ids, positions,
+                              state.products, self._channel_mass, hoppers), events
+
+    def ticks(self, engine: FeederEngine, results: Sequence[TickResult]
+              ) -> tuple[Snapshot, list[Event]]:
+        """Return the engine's snapshot now and the events of its ticks ``results``."""
+        events = [event for result in results
+                  for event in exit_events(result.exits) + pack_events(result.packs)]
+        state = engine.state
+        positions = world_from_cone(state.y, engine.angle, engine.omega)[0]
+        weigher = engine.weigher
+        hoppers = weigher.hopper_readings() if weigher is not None else None
+        return self._snapshot(engine.t, engine.angle, engine.omega, state.ids, positions,
+                              state.products, engine.channel_mass, hoppers), events
