@@ -58,6 +58,7 @@ class FoxgloveClient:
         self.server_info: dict[str, Any] | None = None
         self.channels: dict[str, dict[str, Any]] = {}  # by topic
         self.messages: dict[str, list[tuple[int, bytes]]] = {}  # topic: [(log_time, payload)]
+        self.arrivals: dict[str, list[float]] = {}  # topic: [monotonic time of arrival (s)]
         self._subscriptions: dict[int, str] = {}
         self._lock = threading.Lock()
         self.closed = False
@@ -110,6 +111,7 @@ class FoxgloveClient:
                         if topic is not None:
                             self.messages.setdefault(topic, []).append(
                                 (log_time, payload[13:]))
+                            self.arrivals.setdefault(topic, []).append(time.monotonic())
                 elif opcode == 9:
                     self._send(10, payload)  # pong
                 elif opcode == 8:

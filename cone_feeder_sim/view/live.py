@@ -35,7 +35,7 @@ import time
 from types import ModuleType, TracebackType
 from typing import Any, Self
 
-from .snapshot import Event, Snapshot, Watcher
+from .snapshot import Event, Moment, Snapshot, Watcher
 from .topics import JSON_SCHEMAS, VIEW_TOPICS
 from ..errors import ViewError
 from ..feeder.engine import FeederEngine, TickResult
@@ -147,9 +147,9 @@ class LiveView:
         self.publish_seconds = 0.0
         self.frame_times: list[float] = []
         self._lock = threading.Lock()
-        self._latest: Snapshot | None = None
+        self._latest: Snapshot | Moment | None = None
         self._events: list[Event] = []
-        self._sent: Snapshot | None = None
+        self._sent: Snapshot | Moment | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name='live-view', daemon=True)
         self._thread.start()
@@ -175,8 +175,8 @@ class LiveView:
         self._model = model
         self._watcher = Watcher(model, weigher)
 
-    def show(self, snapshot: Snapshot, events: Sequence[Event] = ()) -> None:
-        """Hand over the newest snapshot and the events since the last one (never blocks)."""
+    def show(self, snapshot: Snapshot | Moment, events: Sequence[Event] = ()) -> None:
+        """Hand over the newest snapshot (or moment) and the events since the last one."""
         with self._lock:
             self._latest = snapshot
             self._events.extend(events)
@@ -212,8 +212,10 @@ class LiveView:
             self._channels['events'].log(self._messages.log_message(event),
                                          log_time=stamp_ns(event.t))
         if snapshot is not self._sent:
-            self._publish(snapshot)
             self._sent = snapshot
+            if isinstance(snapshot, Moment):
+                snapshot = self._watcher.snapshot(snapshot)
+            self._publish(snapshot)
             self.frames += 1
             self.frame_times.append(start)
             del self.frame_times[:-1000]

@@ -17,22 +17,25 @@ What a view shows at one moment, taken from the headless runner or the engine.
 
 A :class:`Snapshot` is a copy of the state that a view draws later, on its own thread:
 the pieces in the world frame, the cone's angle and speed, the channel masses and the
-hopper readings. :class:`Watcher` takes snapshots from the runner's progress callback or
-from the engine's ticks and turns exits and packs into :class:`Event` lines. Pure numpy;
-no viewer library.
+hopper readings. :class:`Watcher` takes a :class:`Moment` (the state as it is, nothing
+computed) from the runner's progress callback or from the engine's ticks, turns exits and
+packs into :class:`Event` lines, and makes the snapshot of a moment later, on the view's
+thread. numpy and scipy; no viewer library.
 """
 
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..feeder.engine import FeederEngine, TickResult
 from ..physics.params import ModelParams, P_S0
-from ..physics.simulation import ExitEvents, Simulator, StepResult, world_from_cone
+from ..physics.simulation import (
+    ExitEvents, SimState, Simulator, StepResult, world_from_cone)
 from ..weigher.machine import Pack, Weigher
 
-__all__ = ['Event', 'ProductKinds', 'Snapshot', 'Watcher', 'touching_pairs']
+__all__ = ['Event', 'Moment', 'ProductKinds', 'Snapshot', 'touching_pairs', 'Watcher']
 
 
 @dataclass(frozen=True)
@@ -71,30 +74,47 @@ class Event:
 
 def touching_pairs(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
     """Return the index pairs (K, 2), i < j, of pieces closer than the sum of their radii."""
-    count = positions.shape[0]
-    if count < 2:
+    if positions.shape[0] < 2:
         return np.zeros((0, 2), dtype=np.int64)
-    first, second = np.triu_indices(count, 1)
-    gap = np.linalg.norm(positions[first] - positions[second], axis=1)
-    near = gap < radii[first] + radii[second]
-    return np.stack([first[near], second[near]], axis=1).astype(np.int64)
+    near = cKDTree(positions).query_pairs(2.0 * float(radii.max()), output_type='ndarray')
+    gap = np.linalg.norm(positions[near[:, 0]] - positions[near[:, 1]], axis=1)
+    pairs = near[gap < radii[near[:, 0]] + radii[near[:, 1]]].astype(np.int64)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
 
 
 class ProductKinds:
     """A product index per piece, by its product row, in order of first appearance."""
 
     def __init__(self) -> None:
-        """Start with no products seen."""
+        """Start with no products and no pieces seen."""
         self._index: dict[bytes, int] = {}
+        self._by_id: dict[int, int] = {}
 
-    def __call__(self, products: np.ndarray) -> np.ndarray:
-        """Return the index (N,) int of each row of products (N, PRODUCT_WIDTH)."""
-        if products.shape[0] == 0:
-            return np.zeros(0, dtype=np.int64)
-        rows, inverse = np.unique(products, axis=0, return_inverse=True)
-        known = np.array([self._index.setdefault(row.tobytes(), len(self._index))
-                          for row in rows], dtype=np.int64)
-        return known[inverse.reshape(-1)]
+    def __call__(self, ids: np.ndarray, products: np.ndarray) -> np.ndarray:
+        """Return the index (N,) int of each piece: ids (N,), products (N, PRODUCT_WIDTH)."""
+        kinds = np.empty(ids.shape[0], dtype=np.int64)
+        for k, piece in enumerate(ids.tolist()):
+            kind = self._by_id.get(piece)
+            if kind is None:
+                kind = self._index.setdefault(products[k].tobytes(), len(self._index))
+                self._by_id[piece] = kind
+            kinds[k] = kind
+        return kinds
+
+
+@dataclass(frozen=True)
+class Moment:
+    """
+    What the simulation hands a view after a step: the state itself, nothing computed.
+
+    state: the simulator's or engine's state (immutable: each step makes a new one);
+    omega (rad/s); channel_mass (C,) kg and hoppers (H,) kg or None: copies.
+    """
+
+    state: SimState
+    omega: float
+    channel_mass: np.ndarray
+    hoppers: np.ndarray | None
 
 
 def exit_events(exits: ExitEvents) -> list[Event]:
@@ -115,10 +135,13 @@ def pack_events(packs: Sequence[Pack]) -> list[Event]:
 
 class Watcher:
     """
-    Takes snapshots and events from a run: the runner's intervals or the engine's ticks.
+    Takes moments and events from a run and makes snapshots of them.
 
-    model: the run's model (the channel count, whether pieces touch); weigher: the
-    machine the runner drives, for its hopper readings and packs (None: none).
+    The moments come from the runner's intervals or the engine's ticks. model: the run's
+    model (the channel count, whether pieces touch); weigher: the machine the runner
+    drives, for its hopper readings and packs (None: none).
+    :meth:`interval` and :meth:`ticks` run on the simulation's thread and only copy what
+    the next step changes in place; :meth:`snapshot` does the work, on the view's thread.
     """
 
     def __init__(self, model: ModelParams, weigher: Weigher | None = None) -> None:
@@ -129,43 +152,37 @@ class Watcher:
         self._channel_mass = np.zeros(model.channels.count)
         self._packs_seen = 0
 
-    def _snapshot(self, t: float, angle: float, omega: float, ids: np.ndarray,
-                  positions: np.ndarray, products: np.ndarray, channel_mass: np.ndarray,
-                  hoppers: np.ndarray | None) -> Snapshot:
-        radii = products[:, P_S0].copy()
-        contacts = (touching_pairs(positions, radii) if self._contacts
-                    else np.zeros((0, 2), dtype=np.int64))
-        return Snapshot(t=float(t), angle=float(angle),
-                        omega=float(omega), ids=ids.copy(), positions=positions.copy(),
-                        radii=radii, kinds=self._kinds(products), contacts=contacts,
-                        channel_mass=channel_mass.copy(),
-                        hoppers=None if hoppers is None else hoppers.copy())
-
-    def interval(self, t: float, sim: Simulator, step: StepResult
-                 ) -> tuple[Snapshot, list[Event]]:
-        """Return the snapshot and events of the runner's interval that ended at t (s)."""
+    def interval(self, t: float, sim: Simulator, step: StepResult) -> tuple[Moment, list[Event]]:
+        """Return the moment and events of the runner's interval that ended at t (s)."""
         exits = step.exits
+        events = []
         if len(exits):
             np.add.at(self._channel_mass, exits.channel - 1, exits.mass)
-        state = sim.state
-        positions = world_from_cone(state.y, state.angle, sim.omega())[0]
-        events = exit_events(exits)
+            events = exit_events(exits)
         hoppers = None
         if self._weigher is not None:
             hoppers = self._weigher.hopper_readings()
             events += pack_events(self._weigher.packs[self._packs_seen:])
             self._packs_seen = len(self._weigher.packs)
-        return self._snapshot(t, state.angle, sim.omega(), state.ids, positions,
-                              state.products, self._channel_mass, hoppers), events
+        return Moment(sim.state, sim.omega(), self._channel_mass.copy(), hoppers), events
 
     def ticks(self, engine: FeederEngine, results: Sequence[TickResult]
-              ) -> tuple[Snapshot, list[Event]]:
-        """Return the engine's snapshot now and the events of its ticks ``results``."""
+              ) -> tuple[Moment, list[Event]]:
+        """Return the engine's moment now and the events of its ticks ``results``."""
         events = [event for result in results
                   for event in exit_events(result.exits) + pack_events(result.packs)]
-        state = engine.state
-        positions = world_from_cone(state.y, engine.angle, engine.omega)[0]
         weigher = engine.weigher
-        hoppers = weigher.hopper_readings() if weigher is not None else None
-        return self._snapshot(engine.t, engine.angle, engine.omega, state.ids, positions,
-                              state.products, engine.channel_mass, hoppers), events
+        return Moment(engine.state, engine.omega, engine.channel_mass,
+                      weigher.hopper_readings() if weigher is not None else None), events
+
+    def snapshot(self, moment: Moment) -> Snapshot:
+        """Return the snapshot of a moment: world positions, radii, kinds, contacts."""
+        state = moment.state
+        positions = world_from_cone(state.y, state.angle, moment.omega)[0]
+        radii = state.products[:, P_S0].copy()
+        contacts = (touching_pairs(positions, radii) if self._contacts
+                    else np.zeros((0, 2), dtype=np.int64))
+        return Snapshot(t=float(state.t), angle=float(state.angle), omega=float(moment.omega),
+                        ids=state.ids.copy(), positions=positions, radii=radii,
+                        kinds=self._kinds(state.ids, state.products), contacts=contacts,
+                        channel_mass=moment.channel_mass, hoppers=moment.hoppers)
