@@ -20,8 +20,9 @@ foxglove-sdk (the optional extra ``[view]``). The simulation hands it snapshots 
 runner's progress callback, after the engine's ticks, or with :meth:`LiveView.show`); its
 own thread publishes the newest one at a steady frame rate (``fps``, wall clock), whatever
 the tick rate, with the exits and packs since the last frame as log lines. The simulation
-only copies its state into a snapshot; it never waits for a client, and a client that
-connects late, or vanishes, changes nothing in the run. Open it in Foxglove with
+only hands over its state; it never waits for a client, and a client that connects late,
+or vanishes, changes nothing in the run. A new subscription gets the last frame again at
+the next frame time, so that a client that connects after the run's end sees its end. Open it in Foxglove with
 "Open connection", ``ws://HOST:PORT`` (config/foxglove_layout.json arranges the panels).
 
 :class:`RealTime` paces a loop to the wall clock (``speed`` simulated seconds per second).
@@ -122,13 +123,15 @@ class LiveView:
         sdk = require_sdk()
         from . import scene  # needs foxglove-sdk
         self.watch(source, weigher)
+        self._resend = threading.Event()  # a client subscribed: send the last frame again
         self._messages = scene
         self._scene = scene.SceneBuilder(self._model)
         self._context = sdk.Context()
         try:
             self._server = sdk.start_server(
                 name=name, host=host, port=port, context=self._context,
-                capabilities=[sdk.Capability.Time])
+                capabilities=[sdk.Capability.Time],
+                server_listener=_Subscriptions(self._resend))
         except RuntimeError as exc:
             raise ViewError(f'cannot serve the live view on {host}:{port}: {exc}') from None
         self._channels: dict[str, Any] = {
@@ -150,6 +153,7 @@ class LiveView:
         self._latest: Snapshot | Moment | None = None
         self._events: list[Event] = []
         self._sent: Snapshot | Moment | None = None
+        self._shown: Snapshot | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name='live-view', daemon=True)
         self._thread.start()
@@ -205,7 +209,9 @@ class LiveView:
         with self._lock:
             snapshot, events = self._latest, self._events
             self._events = []
-        if snapshot is None or (snapshot is self._sent and not events):
+        resend = self._resend.is_set()
+        self._resend.clear()
+        if snapshot is None or (snapshot is self._sent and not events and not resend):
             return
         start = time.monotonic()
         for event in events:
@@ -213,12 +219,14 @@ class LiveView:
                                          log_time=stamp_ns(event.t))
         if snapshot is not self._sent:
             self._sent = snapshot
-            if isinstance(snapshot, Moment):
-                snapshot = self._watcher.snapshot(snapshot)
-            self._publish(snapshot)
+            self._shown = (self._watcher.snapshot(snapshot) if isinstance(snapshot, Moment)
+                           else snapshot)
+            self._publish(self._shown)
             self.frames += 1
             self.frame_times.append(start)
             del self.frame_times[:-1000]
+        elif resend and self._shown is not None:  # e.g. a client after the run's end
+            self._publish(self._shown)
         self.publish_seconds += time.monotonic() - start
 
     def _publish(self, snapshot: Snapshot) -> None:
@@ -247,3 +255,15 @@ class LiveView:
                  traceback: TracebackType | None) -> None:
         """Close the view."""
         self.close()
+
+
+class _Subscriptions:
+    """The server's listener: a subscription asks for the last frame again."""
+
+    def __init__(self, resend: threading.Event) -> None:
+        """Set ``resend`` on every subscription."""
+        self._resend = resend
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        """Ask the frame thread to send the last frame again (new subscribers see it)."""
+        self._resend.set()

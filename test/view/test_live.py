@@ -136,7 +136,10 @@ def test_run_view_serves_the_run_to_early_late_and_vanishing_clients(tmp_path: P
         wait_for(lambda: 'the run ended at t = 2.000 s' in log_path.read_text(), 'the end',
                  log_path)
         wait_for(lambda: len(late.received('/scene')) >= 1, 'a late frame', log_path, 10.0)
-        time.sleep(0.2)  # the view stays: the server still answers
+        after = FoxgloveClient(port)  # after the end: the view stays, with the last frame
+        clients.append(after)
+        after.subscribe('/scene', '/cone_state')
+        wait_for(lambda: len(after.received('/scene')) >= 1, 'the last frame', log_path, 30.0)
         assert proc.poll() is None and not early.closed
         proc.send_signal(signal.SIGINT)
         code = proc.wait(60.0)
@@ -195,6 +198,10 @@ def test_run_view_serves_the_run_to_early_late_and_vanishing_clients(tmp_path: P
     for row in expected_exits:
         assert any(line.startswith(f'piece {row[0]} left into channel {row[3]} ')
                    for line in exits), (row, exits)
+
+    last_t, last = after.decoded('/scene')[0]
+    assert last_t == 2_000_000_000 and len(pieces(last)) == 0
+    assert after.json('/cone_state')[0][0] == last_t
 
     # the late client came in mid-run and saw the whole scene, cone included
     late_frames = late.decoded('/scene')
