@@ -22,8 +22,9 @@ own thread publishes the newest one at a steady frame rate (``fps``, wall clock)
 the tick rate, with the exits and packs since the last frame as log lines. The simulation
 only hands over its state; it never waits for a client, and a client that connects late,
 or vanishes, changes nothing in the run. A new subscription gets the last frame again at
-the next frame time, so that a client that connects after the run's end sees its end. Open it in Foxglove with
-"Open connection", ``ws://HOST:PORT`` (config/foxglove_layout.json arranges the panels).
+the next frame time, so that a client that connects after the run's end sees its end.
+Open it in Foxglove with "Open connection", ``ws://HOST:PORT`` (config/foxglove_layout.json
+arranges the panels).
 
 :class:`RealTime` paces a loop to the wall clock (``speed`` simulated seconds per second).
 """
