@@ -25,6 +25,8 @@ that every frame is encoded and sent.
   times (the machine's speed drifts), the best of each; the view's share of an interval =
   (with - without) / without. Also: the snapshot (the simulation's own share, in the
   progress callback) and the frame (the view's thread: scene, series, events) per call.
+* the same for the engine's 20-ms ticks (what ``sim_node`` and the RL environment tick),
+  the view fed with :meth:`LiveView.ticked`.
 * frame rate: ``--seconds`` of the run paced to real time (speed 1); the frame times as
   the client receives them: frames per second, mean and worst gap.
 
@@ -41,10 +43,11 @@ import time
 from typing import Any
 
 from calibration import calibration_line
+from cone_feeder_sim.feeder.realtime import RealTime
 from cone_feeder_sim.feeder.runner import run_scenario
 from cone_feeder_sim.feeder.scenario import Scenario
 from cone_feeder_sim.formats.scenario_file import scenario_from_mapping
-from cone_feeder_sim.view import LiveView, RealTime
+from cone_feeder_sim.view import LiveView
 import numpy as np
 
 PIECES = 150
@@ -127,6 +130,39 @@ def cost(contact: bool, motion: str, intervals: int, repeat: int) -> None:
           f'{1e3 * best[4] / max(best[3], 1):8.2f} {best[3] / best[0]:7.1f}')
 
 
+def engine_cost(ticks: int, repeat: int) -> None:
+    """Print the view's share of a sim_node tick (the engine, 20 ms) at 150 pieces."""
+    from cone_feeder_sim.feeder.engine import EngineConfig, FeederEngine, FeedParams, PieceSpec
+    case = scenario(False, 'steady', 1.0)
+    config = EngineConfig(model=case.model, feed=FeedParams(rate=0.0, max_pieces=PIECES),
+                          initial_pieces=tuple(PieceSpec(tuple(p.position))
+                                               for p in case.particles))
+
+    def run_engine(view: LiveView | None) -> float:
+        engine = FeederEngine(config)
+        engine.command(3.0)
+        for _ in range(10):  # past the start
+            engine.tick()
+        start = time.perf_counter()
+        for _ in range(ticks):
+            result = engine.tick()
+            if view is not None:
+                view.ticked(engine, [result])
+        return (time.perf_counter() - start) / ticks
+
+    with LiveView(case.model, port=0) as view:
+        client = connect(view.port)
+        client.subscribe(*TOPICS)
+        plain, served = [], []
+        for _ in range(repeat):
+            plain.append(run_engine(None))
+            served.append(run_engine(view))
+        client.close()
+    print(f'engine ticks (20 ms, contact off, steady, {PIECES} pieces): '
+          f'{1e3 * min(plain):.2f} ms without the view, {1e3 * min(served):.2f} ms with it: '
+          f'{100 * (min(served) / min(plain) - 1):.1f} %')
+
+
 def steadiness(seconds: float) -> None:
     """Print the frame rate a client sees over a run paced to real time."""
     case = scenario(False, 'steady', seconds)
@@ -168,6 +204,7 @@ def main() -> None:
         for motion in ('steady', 'reversing'):
             cost(contact, motion, args.intervals if not contact else args.intervals // 4,
                  args.repeat)
+    engine_cost(args.intervals, args.repeat)
     steadiness(args.seconds)
     print(calibration_line())
 

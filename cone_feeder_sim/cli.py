@@ -44,13 +44,14 @@ from typing import Any, Self, TextIO
 
 from . import __version__
 from .errors import ConeFeederError
+from .feeder.realtime import RealTime
 from .feeder.runner import Progress
 from .feeder.scenario import Scenario
 from .formats.mcap_reader import recover_mcap
 from .formats.run_files import run_to_files, RunFiles
 from .formats.scenario_file import load_scenario
 from .physics.simulation import Simulator, StepResult, warm_up
-from .view.live import DEFAULT_FPS, DEFAULT_PORT, LiveView, RealTime
+from .view.live import DEFAULT_FPS, DEFAULT_PORT, LiveView, MAX_FPS
 from .weigher.machine import Weigher
 
 
@@ -240,10 +241,11 @@ def check_view_flags(args: argparse.Namespace) -> None:
         raise ConeFeederError(f'{", ".join(given)}: only with --view')
     if args.port is not None and not 0 <= args.port <= 65535:
         raise ConeFeederError(f'--port must be 0..65535, got {args.port}')
-    for name in ('speed', 'fps'):
-        value = getattr(args, name)
-        if value is not None and not value > 0.0:
-            raise ConeFeederError(f'--{name} must be > 0, got {value:g}')
+    if args.speed is not None and not args.speed > 0.0:
+        raise ConeFeederError(f'--speed must be > 0 (inf: as fast as possible), got '
+                              f'{args.speed:g}')
+    if args.fps is not None and not 0.0 < args.fps <= MAX_FPS:
+        raise ConeFeederError(f'--fps must be in (0, {MAX_FPS:g}], got {args.fps:g}')
 
 
 def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
@@ -261,6 +263,7 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
     bar = None if args.quiet else ProgressBar(scenario.duration, err)
     progress: list[Progress] = [bar] if bar is not None else []
     with contextlib.ExitStack() as stack:
+        stop = stack.enter_context(StopOnSignals())
         view = None
         if args.view:  # before any file: a port in use stops here
             view = stack.enter_context(LiveView(
@@ -269,8 +272,7 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
             err.write(f'live view on {view.url} (Foxglove: Open connection; panels: '
                       'config/foxglove_layout.json)\n')
             err.flush()
-            progress += [view, RealTime(args.speed or 1.0)]
-        stop = stack.enter_context(StopOnSignals())
+            progress += [view, RealTime(args.speed or 1.0, stop=stop)]
         try:
             files = run_to_files(scenario, args.events, packs=args.packs, mcap=args.mcap,
                                  source=args.scenario, progress=progress, stop=stop,
@@ -285,6 +287,8 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
             err.flush()
             while not stop():
                 time.sleep(0.1)
+        if view is not None and view.error is not None:
+            err.write(f'warning: the live view stopped showing the run: {view.error!r}\n')
     return code
 
 

@@ -52,4 +52,4 @@ class EnvConfigError(ConeFeederError, ValueError):
 
 
 class ViewError(ConeFeederError):
-    """The live view cannot start: foxglove-sdk is not installed, or its port is taken."""
+    """The live view cannot start: no foxglove-sdk, its port is taken, or a bad setting."""

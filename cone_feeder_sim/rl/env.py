@@ -76,10 +76,11 @@ from .spaces import (
     action_space, decode_action, features, mass_grid, observation, observation_space)
 from ..errors import EnvConfigError
 from ..feeder.engine import ChannelFeed, FeederEngine, TickResult
+from ..feeder.realtime import RealTime
 from ..physics.params import P_M, P_S0
 from ..physics.simulation import world_from_cone
 from ..view.frame import top_view
-from ..view.live import DEFAULT_PORT, LiveView, RealTime
+from ..view.live import DEFAULT_PORT, LiveView
 
 __all__ = ['ConeFeederEnv']
 
@@ -183,7 +184,7 @@ class ConeFeederEnv(gymnasium.Env):
         self._packs0 = 0
         if self.view is not None:
             self.view.watch(engine)
-            self._pace = RealTime(1.0)
+            self._pace.restart()
             self._results = []
             self.render()
         return self._observation(), self._info(np.zeros(3), 0, 0.0, 0, 0)

@@ -24,7 +24,7 @@ Foxglove messages; ``topics`` is the view's topic table; ``layout`` its Foxglove
 """
 
 from .frame import top_view
-from .live import LiveView, RealTime
+from .live import LiveView
 from .snapshot import Snapshot
 
-__all__ = ['LiveView', 'RealTime', 'Snapshot', 'top_view']
+__all__ = ['LiveView', 'Snapshot', 'top_view']

@@ -25,8 +25,6 @@ or vanishes, changes nothing in the run. A new subscription gets the last frame 
 the next frame time, so that a client that connects after the run's end sees its end.
 Open it in Foxglove with "Open connection", ``ws://HOST:PORT`` (config/foxglove_layout.json
 arranges the panels).
-
-:class:`RealTime` paces a loop to the wall clock (``speed`` simulated seconds per second).
 """
 
 from collections.abc import Sequence
@@ -35,7 +33,7 @@ import json
 import threading
 import time
 from types import ModuleType, TracebackType
-from typing import Any, Self
+from typing import Any, Self, TYPE_CHECKING
 
 from .snapshot import Event, Moment, Snapshot, Watcher
 from .topics import JSON_SCHEMAS, VIEW_TOPICS
@@ -46,13 +44,16 @@ from ..physics.params import ModelParams
 from ..physics.simulation import Simulator, StepResult
 from ..weigher.machine import Weigher
 
-__all__ = ['DEFAULT_FPS', 'DEFAULT_PORT', 'INSTALL_HINT', 'LiveView', 'RealTime',
-           'require_sdk']
+if TYPE_CHECKING:
+    import foxglove.websocket
+
+__all__ = ['DEFAULT_FPS', 'DEFAULT_PORT', 'INSTALL_HINT', 'LiveView', 'MAX_FPS', 'require_sdk']
 
 #: Foxglove's default WebSocket port.
 DEFAULT_PORT = 8765
-#: Frames per second (wall clock) the view publishes by default.
+#: Frames per second (wall clock) the view publishes by default, and at most.
 DEFAULT_FPS = 30.0
+MAX_FPS = 120.0
 #: How to install what the live view needs.
 INSTALL_HINT = ('the live view needs foxglove-sdk: pip install "foxglove-sdk>=0.30" (the '
                 '[view] extra of cone_feeder_sim)')
@@ -64,39 +65,6 @@ def require_sdk() -> ModuleType:
         return importlib.import_module('foxglove')
     except ImportError:
         raise ViewError(INSTALL_HINT) from None
-
-
-class RealTime:
-    """
-    Paces a loop to the wall clock: call it with the simulation time after every step.
-
-    It sleeps until ``t / speed`` wall seconds have passed since its first call (the
-    anchor); ``speed`` inf never sleeps. A step that ran late is not made up by bunching
-    the next ones: the anchor moves so that the loop is never more than one call behind.
-    Usable as the runner's progress callback.
-    """
-
-    def __init__(self, speed: float = 1.0) -> None:
-        """Pace at ``speed`` simulated seconds per wall second (> 0; inf: no pacing)."""
-        if not speed > 0.0:
-            raise ValueError(f'speed must be > 0 (inf: as fast as possible), got {speed}')
-        self.speed = float(speed)
-        self._anchor: tuple[float, float] | None = None
-
-    def __call__(self, t: float, *_: Any) -> None:
-        """Wait until the wall clock reaches simulation time t (s)."""
-        if self.speed == float('inf'):
-            return
-        now = time.monotonic()
-        if self._anchor is None:
-            self._anchor = (now, t)
-            return
-        wall0, t0 = self._anchor
-        due = wall0 + (t - t0) / self.speed
-        if due > now:
-            time.sleep(due - now)
-        else:
-            self._anchor = (now, t)  # behind: go on from here, do not bunch
 
 
 class LiveView:
@@ -119,10 +87,13 @@ class LiveView:
                  port: int = DEFAULT_PORT, host: str = '127.0.0.1',
                  fps: float = DEFAULT_FPS, name: str = 'cone_feeder_sim') -> None:
         """Start the server and the frame thread."""
-        if not fps > 0.0:
-            raise ViewError(f'the live view needs fps > 0, got {fps}')
+        if not 0.0 < fps <= MAX_FPS:
+            raise ViewError(f'the live view needs 0 < fps <= {MAX_FPS:g}, got {fps}')
         sdk = require_sdk()
         from . import scene  # needs foxglove-sdk
+        self._lock = threading.Lock()
+        self._latest: Snapshot | Moment | None = None
+        self._events: list[Event] = []
         self.watch(source, weigher)
         self._resend = threading.Event()  # a client subscribed: send the last frame again
         self._messages = scene
@@ -132,30 +103,35 @@ class LiveView:
             self._server = sdk.start_server(
                 name=name, host=host, port=port, context=self._context,
                 capabilities=[sdk.Capability.Time],
-                server_listener=_Subscriptions(self._resend))
+                server_listener=_listener(sdk, self._resend))
         except RuntimeError as exc:
             raise ViewError(f'cannot serve the live view on {host}:{port}: {exc}') from None
-        self._channels: dict[str, Any] = {
-            'scene': sdk.channels.SceneUpdateChannel(VIEW_TOPICS['scene'].name,
-                                                     context=self._context),
-            'events': sdk.channels.LogChannel(VIEW_TOPICS['events'].name,
-                                              context=self._context)}
-        for key, schema in JSON_SCHEMAS.items():
-            self._channels[key] = sdk.Channel(VIEW_TOPICS[key].name, schema=schema,
-                                              message_encoding='json',
-                                              context=self._context)
+        try:
+            self._channels: dict[str, Any] = {
+                'scene': sdk.channels.SceneUpdateChannel(VIEW_TOPICS['scene'].name,
+                                                         context=self._context),
+                'events': sdk.channels.LogChannel(VIEW_TOPICS['events'].name,
+                                                  context=self._context)}
+            for key, schema in JSON_SCHEMAS.items():
+                self._channels[key] = sdk.Channel(VIEW_TOPICS[key].name, schema=schema,
+                                                  message_encoding='json',
+                                                  context=self._context)
+        except BaseException:
+            self._server.stop()
+            raise
         self.host = host
         self._port = int(self._server.port)
         self.period = 1.0 / fps
         self.frames = 0
         self.publish_seconds = 0.0
         self.frame_times: list[float] = []
-        self._lock = threading.Lock()
-        self._latest: Snapshot | Moment | None = None
-        self._events: list[Event] = []
+        #: The error that stopped the frame thread (the run goes on; the view freezes).
+        self.error: BaseException | None = None
         self._sent: Snapshot | Moment | None = None
         self._shown: Snapshot | None = None
         self._stop = threading.Event()
+        if isinstance(source, FeederEngine):
+            self.ticked(source)  # the engine as it is now, before its first tick
         self._thread = threading.Thread(target=self._run, name='live-view', daemon=True)
         self._thread.start()
 
@@ -173,12 +149,20 @@ class LiveView:
 
     def watch(self, source: FeederEngine | ModelParams, weigher: Weigher | None = None
               ) -> None:
-        """Watch a new run from its start (an RL episode's new engine) of the same model."""
+        """
+        Watch a new run from its start (an RL episode's new engine).
+
+        The run must have the view's model (the scene's cone and channels are built once).
+        What the previous run handed over and has not been shown yet is dropped.
+        """
         model = source.model if isinstance(source, FeederEngine) else source
         if isinstance(source, FeederEngine):
             weigher = source.weigher
-        self._model = model
-        self._watcher = Watcher(model, weigher)
+        with self._lock:
+            self._model = model
+            self._watcher = Watcher(model, weigher)
+            self._latest = None
+            self._events = []
 
     def show(self, snapshot: Snapshot | Moment, events: Sequence[Event] = ()) -> None:
         """Hand over the newest snapshot (or moment) and the events since the last one."""
@@ -198,20 +182,24 @@ class LiveView:
 
     def _run(self) -> None:
         due = time.monotonic()
-        while not self._stop.wait(max(0.0, due - time.monotonic())):
-            self._frame()
-            due += self.period
-            now = time.monotonic()
-            if due < now - self.period:  # a frame ran late: keep the rate, drop the lag
-                due = now
-        self._frame()  # the last state, as the run left it
+        try:
+            while not self._stop.wait(max(0.0, due - time.monotonic())):
+                self._frame()
+                due += self.period
+                now = time.monotonic()
+                if due < now - self.period:  # more than a frame late: drop the lag
+                    due = now + self.period
+            self._frame()  # the last state, as the run left it
+        except Exception as exc:  # noqa: B902 - the run goes on; the error is kept
+            self.error = exc
 
     def _frame(self) -> None:
         with self._lock:
-            snapshot, events = self._latest, self._events
+            snapshot, events, watcher = self._latest, self._events, self._watcher
             self._events = []
         resend = self._resend.is_set()
-        self._resend.clear()
+        if resend:
+            self._resend.clear()
         if snapshot is None or (snapshot is self._sent and not events and not resend):
             return
         start = time.monotonic()
@@ -220,7 +208,7 @@ class LiveView:
                                          log_time=stamp_ns(event.t))
         if snapshot is not self._sent:
             self._sent = snapshot
-            self._shown = (self._watcher.snapshot(snapshot) if isinstance(snapshot, Moment)
+            self._shown = (watcher.snapshot(snapshot) if isinstance(snapshot, Moment)
                            else snapshot)
             self._publish(self._shown)
             self.frames += 1
@@ -241,7 +229,11 @@ class LiveView:
     # ------------------------------------------------------------------ ending
 
     def close(self) -> None:
-        """Publish the last snapshot, stop the frame thread and the server; idempotent."""
+        """
+        Publish the last snapshot, stop the frame thread and the server; idempotent.
+
+        An error that stopped the frame thread earlier is in :attr:`error` (not raised).
+        """
         if self._stop.is_set():
             return
         self._stop.set()
@@ -258,13 +250,12 @@ class LiveView:
         self.close()
 
 
-class _Subscriptions:
-    """The server's listener: a subscription asks for the last frame again."""
+def _listener(sdk: ModuleType, resend: threading.Event) -> Any:
+    """Return the server's listener: a subscription asks for the last frame again."""
 
-    def __init__(self, resend: threading.Event) -> None:
-        """Set ``resend`` on every subscription."""
-        self._resend = resend
+    class Subscriptions(sdk.websocket.ServerListener):  # the SDK's no-op defaults
+        def on_subscribe(self, client: 'foxglove.websocket.Client',
+                         channel: 'foxglove.websocket.ChannelView') -> None:
+            resend.set()
 
-    def on_subscribe(self, client: Any, channel: Any) -> None:
-        """Ask the frame thread to send the last frame again (new subscribers see it)."""
-        self._resend.set()
+    return Subscriptions()

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..feeder.engine import FeederEngine, TickResult
-from ..physics.params import ModelParams, P_S0
+from ..physics.params import ModelParams, P_M, P_S0
 from ..physics.simulation import (
     ExitEvents, SimState, Simulator, StepResult, world_from_cone)
 from ..weigher.machine import Pack, Weigher
@@ -73,7 +73,12 @@ class Event:
 
 
 def touching_pairs(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Return the index pairs (K, 2), i < j, of pieces closer than the sum of their radii."""
+    """
+    Return the index pairs (K, 2), i < j, sorted, of pieces closer than their radii's sum.
+
+    positions (N, 3) m; radii (N,) m. Candidates come from scipy's KD-tree within twice the
+    largest radius.
+    """
     if positions.shape[0] < 2:
         return np.zeros((0, 2), dtype=np.int64)
     near = cKDTree(positions).query_pairs(2.0 * float(radii.max()), output_type='ndarray')
@@ -83,7 +88,13 @@ def touching_pairs(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
 
 
 class ProductKinds:
-    """A product index per piece, by its product row, in order of first appearance."""
+    """
+    A product index per piece, in order of first appearance: its colour.
+
+    A product is a product row without its mass: the feed draws every piece's mass (its
+    ``mass_rel_std``), and pieces of one product differ only in that. A piece keeps the
+    index it got first (by id); ids that left are forgotten.
+    """
 
     def __init__(self) -> None:
         """Start with no products and no pieces seen."""
@@ -93,12 +104,15 @@ class ProductKinds:
     def __call__(self, ids: np.ndarray, products: np.ndarray) -> np.ndarray:
         """Return the index (N,) int of each piece: ids (N,), products (N, PRODUCT_WIDTH)."""
         kinds = np.empty(ids.shape[0], dtype=np.int64)
+        by_id = {}
         for k, piece in enumerate(ids.tolist()):
             kind = self._by_id.get(piece)
             if kind is None:
-                kind = self._index.setdefault(products[k].tobytes(), len(self._index))
-                self._by_id[piece] = kind
-            kinds[k] = kind
+                row = products[k].copy()
+                row[P_M] = 0.0
+                kind = self._index.setdefault(row.tobytes(), len(self._index))
+            by_id[piece] = kinds[k] = kind
+        self._by_id = by_id
         return kinds
 
 

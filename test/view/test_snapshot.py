@@ -1,0 +1,38 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Tests of what a view shows: touching pairs against all pairs, colours by product."""
+
+from cone_feeder_sim.physics.params import P_D, P_M, product_row, ProductParams
+from cone_feeder_sim.view.snapshot import ProductKinds, touching_pairs
+import numpy as np
+
+
+def test_touching_pairs_and_product_kinds() -> None:
+    rng = np.random.default_rng(5)
+    positions = rng.uniform(-0.1, 0.1, (60, 3))
+    radii = rng.uniform(0.01, 0.03, 60)
+    expected = [(i, j) for i in range(60) for j in range(i + 1, 60)
+                if np.linalg.norm(positions[i] - positions[j]) < radii[i] + radii[j]]
+    assert len(expected) > 10
+    assert [tuple(p) for p in touching_pairs(positions, radii)] == expected
+    assert touching_pairs(positions[:1], radii[:1]).shape == (0, 2)
+    rows = np.array([product_row(ProductParams().with_overrides(
+        {'m': 0.1 + 0.01 * k, 'd': 30.0 if k % 3 else 750.0})) for k in range(6)])
+    kinds = ProductKinds()
+    first = kinds(np.arange(6), rows)
+    assert first.tolist() == [0, 1, 1, 0, 1, 1]  # the mass is not the product, d is
+    rows[:, P_M] = 0.5  # a piece keeps its colour; a new id of a new product gets the next
+    rows[:, P_D] = 135.0
+    assert kinds(np.array([5, 9]), rows[:2]).tolist() == [1, 2]
