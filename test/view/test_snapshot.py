@@ -36,3 +36,34 @@ def test_touching_pairs_and_product_kinds() -> None:
     rows[:, P_M] = 0.5  # a piece keeps its colour; a new id of a new product gets the next
     rows[:, P_D] = 135.0
     assert kinds(np.array([5, 9]), rows[:2]).tolist() == [1, 2]
+
+
+def test_a_moment_handed_over_is_not_changed_by_later_steps() -> None:
+    """The view keeps the state object itself: later steps must make new arrays."""
+    from cone_feeder_sim.feeder.engine import EngineConfig, FeederEngine, FeedParams
+    from cone_feeder_sim.feeder.runner import start_simulator
+    from cone_feeder_sim.formats.scenario_file import scenario_from_mapping
+    from cone_feeder_sim.physics.params import ModelParams
+    from cone_feeder_sim.view.snapshot import Watcher
+    engine = FeederEngine(EngineConfig(feed=FeedParams(rate=50.0)))
+    engine.command(5.0)
+    watcher = Watcher(ModelParams())
+    for _ in range(5):
+        engine.tick()
+    moment, _ = watcher.ticks(engine, [])
+    scenario = scenario_from_mapping({'duration': 1.0, 'rotation': [[0.0, 6.0]], 'particles': [
+        {'position': [0.1, 0.0, 0.0], 'on_surface': True},
+        {'position': [0.0, 0.2, 0.0], 'on_surface': True}]})
+    sim = start_simulator(scenario)
+    interval, _ = watcher.interval(0.1, sim, sim.advance_to(0.1))
+    kept = [(m.state.y.copy(), m.state.products.copy(), m.state.ids.copy(), m.state.t)
+            for m in (moment, interval)]
+    for _ in range(5):
+        engine.tick()
+    sim.advance_to(0.5)
+    for m, (y, products, ids, t) in zip((moment, interval), kept):
+        np.testing.assert_array_equal(m.state.y, y)
+        np.testing.assert_array_equal(m.state.products, products)
+        np.testing.assert_array_equal(m.state.ids, ids)
+        assert m.state.t == t
+    assert engine.t > moment.state.t and len(moment.state.ids) > 0
