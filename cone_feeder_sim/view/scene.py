@@ -17,7 +17,8 @@ The live view's messages, in the Foxglove SDK's own schemas (needs ``foxglove-sd
 
 :class:`SceneBuilder` turns a :class:`~cone_feeder_sim.view.snapshot.Snapshot` into one
 foxglove.SceneUpdate: the static entity (the cone as a cylinder narrowed to its apex, the
-channel boundaries and numbers outside the rim, built once), the mark that turns with the
+channel sectors as a ring outside the rim, odd and even channels in two colours, their
+boundaries and numbers, built once), the mark that turns with the
 cone, every piece as a sphere of its outer radius s0 coloured by product, and a line
 between every two pieces that touch. All in the frame ``feeder``, lengths in metres.
 """
@@ -28,7 +29,7 @@ from typing import Any
 from foxglove.messages import (
     Color, CylinderPrimitive, LinePrimitive, LinePrimitiveLineType, Log, LogLevel, Point3,
     Pose, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, TextPrimitive, Timestamp,
-    Vector3)
+    TriangleListPrimitive, Vector3)
 import numpy as np
 
 from .frame import PALETTE
@@ -44,6 +45,8 @@ _UPRIGHT = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
 _CONE = Color(r=0.7, g=0.72, b=0.75, a=0.8)
 _BOUNDARY = Color(r=0.35, g=0.35, b=0.35, a=1.0)
 _MARK = Color(r=0.1, g=0.1, b=0.1, a=1.0)
+#: The channel sectors' colours, odd and even channels (as the node's markers).
+_SECTORS = (Color(r=0.25, g=0.55, b=0.85, a=0.9), Color(r=0.95, g=0.75, b=0.2, a=0.9))
 _CONTACT = Color(r=0.0, g=0.0, b=0.0, a=1.0)
 #: Piece colours by product index (cycled): the top view's palette.
 _PIECES = tuple(Color(r=r / 255.0, g=g / 255.0, b=b / 255.0, a=1.0) for r, g, b in PALETTE)
@@ -59,6 +62,18 @@ def _pose(x: float, y: float, z: float) -> Pose:
     return Pose(position=Vector3(x=x, y=y, z=z), orientation=_UPRIGHT)
 
 
+def _ring(inner: float, outer: float, start: float, end: float, parts: int = 8
+          ) -> list[Point3]:
+    """Return the triangles (6 points a part) of the ring sector from start to end (rad)."""
+    points = []
+    edges = [start + (end - start) * k / parts for k in range(parts + 1)]
+    for a0, a1 in zip(edges[:-1], edges[1:]):
+        i0, i1, o0, o1 = ((radius * math.cos(a), radius * math.sin(a))
+                          for radius, a in ((inner, a0), (inner, a1), (outer, a0), (outer, a1)))
+        points += [Point3(x=x, y=y, z=0.0) for x, y in (i0, o0, o1, i0, o1, i1)]
+    return points
+
+
 class SceneBuilder:
     """The SceneUpdate of a snapshot, with the static entity of the model built once."""
 
@@ -72,11 +87,13 @@ class SceneBuilder:
         channels = model.channels
         points = []
         texts = []
+        sectors: tuple[list[Point3], list[Point3]] = ([], [])  # odd, even channels
         for channel in range(1, channels.count + 1):
             start, end = (math.radians(a) for a in channels.sector_edges(channel))
             for radius in (r, 1.15 * r):
                 points.append(Point3(x=radius * math.cos(start), y=radius * math.sin(start),
                                      z=0.0))
+            sectors[channel % 2 == 0].extend(_ring(r, 1.15 * r, start, end))
             mid = 0.5 * (start + end)
             texts.append(TextPrimitive(pose=_pose(1.25 * r * math.cos(mid),
                                                   1.25 * r * math.sin(mid), 0.01),
@@ -85,20 +102,22 @@ class SceneBuilder:
         boundaries = LinePrimitive(type=LinePrimitiveLineType.LineList, pose=_pose(0, 0, 0),
                                    thickness=0.003, scale_invariant=False, points=points,
                                    color=_BOUNDARY)
-        self._static = (cone, boundaries, texts)
+        rings = [TriangleListPrimitive(pose=_pose(0, 0, 0), points=ring, color=shade)
+                 for ring, shade in zip(sectors, _SECTORS)]
+        self._static = (cone, boundaries, texts, rings)
 
     def update(self, snapshot: Snapshot) -> SceneUpdate:
         """Return the scene at the snapshot: static entity, mark, pieces, contacts."""
         model = self._model
         when = timestamp(snapshot.t)
-        cone, boundaries, texts = self._static
+        cone, boundaries, texts, rings = self._static
         c, s = math.cos(snapshot.angle), math.sin(snapshot.angle)
         mark = LinePrimitive(type=LinePrimitiveLineType.LineStrip, pose=_pose(0, 0, 0),
                              thickness=0.004, scale_invariant=False, color=_MARK,
                              points=[Point3(x=0.0, y=0.0, z=model.h + 0.002),
                                      Point3(x=model.r * c, y=model.r * s, z=0.002)])
         feeder = SceneEntity(timestamp=when, frame_id=FRAME, id='feeder', cylinders=[cone],
-                             lines=[boundaries, mark], texts=texts)
+                             lines=[boundaries, mark], texts=texts, triangles=rings)
         spheres = [SpherePrimitive(pose=_pose(x, y, z), size=Vector3(x=d, y=d, z=d),
                                    color=_PIECES[kind % len(_PIECES)])
                    for (x, y, z), d, kind in zip(snapshot.positions.tolist(),

@@ -236,6 +236,11 @@ def test_scene_of_a_scripted_snapshot() -> None:
     assert cone.get('bottom_scale') == 1.0 and 'top_scale' not in cone  # a point at the top
     boundaries, mark = feeder['lines']
     assert len(boundaries['points']) == 2 * 14 and len(feeder['texts']) == 14
+    odd, even = feeder['triangles']  # the sectors: 8 parts of 2 triangles per channel
+    assert len(odd['points']) == len(even['points']) == 7 * 8 * 6
+    corner = odd['points'][0]  # channel 1's first inner corner, on its start edge
+    assert math.atan2(corner['y'], corner['x']) == pytest.approx(
+        math.remainder(math.radians(model.channels.sector_edges(1)[0]), 2 * math.pi))
     start = math.radians(model.channels.sector_edges(1)[0])
     assert boundaries['points'][0]['x'] == pytest.approx(model.r * math.cos(start))
     tip = mark['points'][1]
