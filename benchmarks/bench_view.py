@@ -26,7 +26,7 @@ that every frame is encoded and sent.
   (with - without) / without. Also: the snapshot (the simulation's own share, in the
   progress callback) and the frame (the view's thread: scene, series, events) per call.
 * the same for the engine's 20-ms ticks (what ``sim_node`` and the RL environment tick),
-  the view fed with :meth:`LiveView.ticked`.
+  the view watching the engine (it observes every tick).
 * frame rate: ``--seconds`` of the run paced to real time (speed 1); the frame times as
   the client receives them: frames per second, mean and worst gap.
 
@@ -143,11 +143,11 @@ def engine_cost(ticks: int, repeat: int) -> None:
         engine.command(3.0)
         for _ in range(10):  # past the start
             engine.tick()
+        if view is not None:
+            view.watch(engine)  # the view observes every tick
         start = time.perf_counter()
         for _ in range(ticks):
-            result = engine.tick()
-            if view is not None:
-                view.ticked(engine, [result])
+            engine.tick()
         return (time.perf_counter() - start) / ticks
 
     with LiveView(case.model, port=0) as view:

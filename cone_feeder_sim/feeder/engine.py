@@ -49,7 +49,7 @@ pieces again. The drive and feed parameters in force (after reconfigurations) ar
 No wall clock is read here: timing belongs to the caller (the ROS node).
 """
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 import math
 import threading
@@ -385,6 +385,7 @@ class FeederEngine:
         self._index = 0
         self._state = SimState()
         self._channel_mass = np.zeros(config.model.channels.count)
+        self._observers: list[TickObserver] = []
         warm_up()  # the kernels are loaded now, never inside a tick
         if config.weigher is not None:
             warm_up_weigher()
@@ -638,6 +639,15 @@ class FeederEngine:
         limit = drive.max_angular_velocity
         return min(max(target, -limit), limit), mode
 
+    def observe(self, callback: 'TickObserver') -> None:
+        """Call callback(engine, result) after every tick (on the ticking thread)."""
+        self._observers.append(callback)
+
+    def unobserve(self, callback: 'TickObserver') -> None:
+        """Stop calling callback after ticks (no error if it was not observing)."""
+        if callback in self._observers:
+            self._observers.remove(callback)
+
     def tick(self) -> TickResult:
         """Apply the queued inputs, drop the feed, advance by dt and return the result."""
         plan = self._begin_tick()
@@ -686,7 +696,7 @@ class FeederEngine:
             hoppers = self._weigher.hopper_readings()
             weigher_stats = self._weigher.stats()
         q, qdot, _ = world_from_cone(self._state.y, self._state.angle, self._omega)
-        return TickResult(
+        result = TickResult(
             index=plan.index, t0=plan.t0, t=plan.t1, angle=self._state.angle,
             omega=self._omega, target_omega=plan.target, mode=plan.mode,
             ids=self._state.ids.copy(), positions=q, velocities=qdot,
@@ -696,6 +706,9 @@ class FeederEngine:
             refusals=tuple(self._refusals), mass_in=self._mass_in,
             failed_mass=self._failed_mass, packs=packs, hoppers=hoppers,
             weigher_stats=weigher_stats)
+        for callback in tuple(self._observers):
+            callback(self, result)
+        return result
 
 
 @dataclass(frozen=True, eq=False)
@@ -712,6 +725,10 @@ class _TickPlan:
     target: float
     mode: str
     profile: RotationProfile
+
+
+#: Called after every tick of an engine it observes, with the engine and the tick's result.
+TickObserver = Callable[[FeederEngine, TickResult], None]
 
 
 def tick_many(engines: Sequence[FeederEngine]) -> list[TickResult]:

@@ -132,7 +132,6 @@ class ConeFeederEnv(gymnasium.Env):
         if render_mode == 'human':
             self.view = LiveView(self.config.engine.model, port=view_port)
         self._pace = RealTime(1.0)
-        self._results: list[TickResult] = []
         self.metadata = {**self.metadata, 'render_fps': 1.0 / self.config.control_period}
         self.observation_space = observation_space(self.config)
         self.action_space = action_space(self.config)
@@ -183,9 +182,8 @@ class ConeFeederEnv(gymnasium.Env):
         self._mass0 = engine.channel_mass
         self._packs0 = 0
         if self.view is not None:
-            self.view.watch(engine)
+            self.view.watch(engine)  # shows every tick of the episode
             self._pace.restart()
-            self._results = []
             self.render()
         return self._observation(), self._info(np.zeros(3), 0, 0.0, 0, 0)
 
@@ -211,7 +209,6 @@ class ConeFeederEnv(gymnasium.Env):
         failures = sum(len(result.failures) for result in results)
         self._steps += 1
         if self.render_mode == 'human':
-            self._results = results
             self.render()
         terms = self._reward_terms(packs, giveaway)
         truncated = self._steps >= self.config.episode_steps
@@ -249,12 +246,10 @@ class ConeFeederEnv(gymnasium.Env):
         """
         Return the top view (FRAME_SIZE, FRAME_SIZE, 3) uint8 with 'rgb_array', else None.
 
-        With 'human' it shows the state on the live view and waits for the wall clock
-        (called by reset and step).
+        With 'human' the live view shows every tick by itself; this waits for the wall
+        clock (called by reset and step).
         """
         if self.view is not None:
-            self.view.ticked(self.engine, self._results)
-            self._results = []
             self._pace(self.engine.t)
             return None
         if self.render_mode != 'rgb_array':

@@ -71,14 +71,15 @@ class LiveView:
     """
     A Foxglove WebSocket server showing one run live.
 
-    source: the engine to watch (its model and weigher) or the run's model. weigher: the
-    machine the headless runner drives (its hopper readings and packs; ignored with an
-    engine). port: the TCP port (0: any free one, see :attr:`port`); host: the address to
+    source: the engine to watch (its model and weigher; every tick of it is shown) or the
+    run's model. weigher: the machine the headless runner drives (its hopper readings and
+    packs; ignored with an engine). port: the TCP port (0: any free one, see :attr:`port`); host: the address to
     bind (default this machine only). fps: frames per wall second. Raises ViewError when
     foxglove-sdk is missing or the port cannot be bound; nothing is served then.
 
-    Use it as a context manager or call :meth:`close`. Feed it with :meth:`__call__` (the
-    runner's progress callback), :meth:`ticked` (after engine ticks) or :meth:`show`.
+    Use it as a context manager or call :meth:`close`. A watched engine feeds it by itself;
+    else feed it with :meth:`__call__` (the runner's progress callback), :meth:`ticked`
+    (after an engine's ticks) or :meth:`show`.
     Counters for benchmarks: ``frames`` published, ``publish_seconds`` spent publishing
     (wall, on the view's thread), ``frame_times`` (monotonic s) of the last 1,000 frames.
     """
@@ -94,6 +95,7 @@ class LiveView:
         self._lock = threading.Lock()
         self._latest: Snapshot | Moment | None = None
         self._events: list[Event] = []
+        self._engine: FeederEngine | None = None
         self.watch(source, weigher)
         self._resend = threading.Event()  # a client subscribed: send the last frame again
         self._messages = scene
@@ -130,8 +132,6 @@ class LiveView:
         self._sent: Snapshot | Moment | None = None
         self._shown: Snapshot | None = None
         self._stop = threading.Event()
-        if isinstance(source, FeederEngine):
-            self.ticked(source)  # the engine as it is now, before its first tick
         self._thread = threading.Thread(target=self._run, name='live-view', daemon=True)
         self._thread.start()
 
@@ -150,19 +150,27 @@ class LiveView:
     def watch(self, source: FeederEngine | ModelParams, weigher: Weigher | None = None
               ) -> None:
         """
-        Watch a new run from its start (an RL episode's new engine).
+        Watch a run from its start: an engine (every tick of it is shown) or a model.
 
-        The run must have the view's model (the scene's cone and channels are built once).
-        What the previous run handed over and has not been shown yet is dropped.
+        A new run (an RL episode's new engine) must have the view's model (the scene's cone
+        and channels are built once). The engine watched before is let go; what its run
+        handed over and has not been shown yet is dropped. An engine is shown at once, as it
+        is.
         """
         model = source.model if isinstance(source, FeederEngine) else source
         if isinstance(source, FeederEngine):
             weigher = source.weigher
         with self._lock:
+            if self._engine is not None:
+                self._engine.unobserve(self.ticked)
+            self._engine = source if isinstance(source, FeederEngine) else None
             self._model = model
             self._watcher = Watcher(model, weigher)
             self._latest = None
             self._events = []
+        if self._engine is not None:
+            self._engine.observe(self.ticked)
+            self.ticked(self._engine)
 
     def show(self, snapshot: Snapshot | Moment, events: Sequence[Event] = ()) -> None:
         """Hand over the newest snapshot (or moment) and the events since the last one."""
@@ -174,8 +182,13 @@ class LiveView:
         """Show the runner's interval that ended at t (s): the runner's progress callback."""
         self.show(*self._watcher.interval(t, sim, step))
 
-    def ticked(self, engine: FeederEngine, results: Sequence[TickResult] = ()) -> None:
-        """Show the engine now, with the exits and packs of its ticks ``results``."""
+    def ticked(self, engine: FeederEngine, *results: TickResult) -> None:
+        """
+        Show the engine now, with the exits and packs of its ticks ``results``.
+
+        The watched engine calls it after every tick (an engine observer); call it for an
+        engine the view does not watch.
+        """
         self.show(*self._watcher.ticks(engine, results))
 
     # ------------------------------------------------------------------ publishing
@@ -236,6 +249,8 @@ class LiveView:
         """
         if self._stop.is_set():
             return
+        if self._engine is not None:
+            self._engine.unobserve(self.ticked)
         self._stop.set()
         self._thread.join()
         self._server.stop()

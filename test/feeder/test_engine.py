@@ -20,7 +20,7 @@ from cone_feeder_sim.errors import InputError, ParameterError, ScenarioError
 from cone_feeder_sim.feeder.engine import (
     drive_profile, DriveParams, EngineConfig, FeederEngine, FeedParams, MAX_PENDING_INPUTS,
     pattern_from_flat, PieceSpec, Reconfigure, ResetRequest, RotationCommand, SpawnRequest,
-    tick_many)
+    tick_many, TickResult)
 from cone_feeder_sim.physics.integrator import advance_batch, advance_batch_owned
 from cone_feeder_sim.physics.params import (
     ChannelLayout, InteractionParams, ModelParams, SolverParams)
@@ -604,3 +604,20 @@ def test_tick_many_equals_each_engines_own_ticks() -> None:
             exits += len(mine.exits)
     assert exits > 0 and all(eng.piece_count > 5 for eng in together)
     assert list(advance_batch_owned.signatures) == loaded
+
+
+def test_observers_see_every_tick_until_let_go() -> None:
+    engine = FeederEngine(EngineConfig(feed=FeedParams(rate=20.0)))
+    seen: list[tuple[int, float]] = []
+
+    def observer(source: FeederEngine, result: TickResult) -> None:
+        assert source is engine
+        seen.append((result.index, source.t))
+
+    engine.observe(observer)
+    results = [engine.tick() for _ in range(3)]
+    assert seen == [(r.index, r.t) for r in results]
+    engine.unobserve(observer)
+    engine.unobserve(observer)  # not observing: no error
+    engine.tick()
+    assert len(seen) == 3
