@@ -73,9 +73,10 @@ class LiveView:
 
     source: the engine to watch (its model and weigher; every tick of it is shown) or the
     run's model. weigher: the machine the headless runner drives (its hopper readings and
-    packs; ignored with an engine). port: the TCP port (0: any free one, see :attr:`port`); host: the address to
-    bind (default this machine only). fps: frames per wall second. Raises ViewError when
-    foxglove-sdk is missing or the port cannot be bound; nothing is served then.
+    packs; ignored with an engine). port: the TCP port (0: any free one, see
+    :attr:`port`); host: the address to bind (default this machine only). fps: frames per
+    wall second, at most MAX_FPS. Raises ViewError when foxglove-sdk is missing or the port
+    cannot be bound; nothing is served then.
 
     Use it as a context manager or call :meth:`close`. A watched engine feeds it by itself;
     else feed it with :meth:`__call__` (the runner's progress callback), :meth:`ticked`
