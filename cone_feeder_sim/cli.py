@@ -52,6 +52,7 @@ from .formats.run_files import run_to_files, RunFiles
 from .formats.scenario_file import load_scenario
 from .physics.simulation import Simulator, StepResult, warm_up
 from .view.live import DEFAULT_FPS, DEFAULT_PORT, LiveView, MAX_FPS
+from .view.topics import layout_file
 from .weigher.machine import Weigher
 
 
@@ -269,8 +270,8 @@ def cmd_run(args: argparse.Namespace, err: TextIO) -> int:
             view = stack.enter_context(LiveView(
                 scenario.model, weigher=weigher, fps=args.fps or DEFAULT_FPS,
                 port=DEFAULT_PORT if args.port is None else args.port))
-            err.write(f'live view on {view.url} (Foxglove: Open connection; panels: '
-                      'config/foxglove_layout.json)\n')
+            err.write(f'live view on {view.url} (Foxglove: Open connection; layout: '
+                      f'{layout_file()})\n')
             err.flush()
             progress += [view, RealTime(args.speed or 1.0, stop=stop)]
         try:

@@ -25,11 +25,16 @@ the node's frame.
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+from ..formats.parameter_file import config_dir
 from ..formats.topics import TOPICS
 
-__all__ = ['FRAME', 'JSON_SCHEMAS', 'node_topic', 'VIEW_TOPICS', 'ViewTopic']
+__all__ = ['FRAME', 'JSON_SCHEMAS', 'layout_file', 'node_topic', 'VIEW_TOPICS', 'ViewTopic']
+
+#: The Foxglove layout's file name in the package's config directory.
+LAYOUT_FILE = 'foxglove_layout.json'
 
 #: The frame of every entity: the node's (``frame_id`` parameter, default ``feeder``).
 FRAME = 'feeder'
@@ -42,6 +47,11 @@ class ViewTopic:
     name: str
     schema: str
     what: str
+
+
+def layout_file() -> Path:
+    """Return the installed Foxglove layout (config/foxglove_layout.json of the package)."""
+    return config_dir() / LAYOUT_FILE
 
 
 def node_topic(name: str, node: str = 'sim_node') -> str:
