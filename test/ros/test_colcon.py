@@ -104,6 +104,8 @@ def test_ros2_run_lookup_finds_and_runs_the_installed_node(
     share = Path(get_package_share_directory(PACKAGE))
     config = share / 'config' / 'sim_node.yaml'
     assert config.is_file() and (share / 'config' / 'table2.yaml').is_file()
+    for name in ('foxglove_layout.json', 'paper_table1_exits.csv'):  # not only YAML files
+        assert (share / 'config' / name).is_file(), name
     # `ros2 launch cone_feeder_sim sim.launch.py` finds the launch file here
     launch_file = share / 'launch' / 'sim.launch.py'
     assert launch_file.is_file()
