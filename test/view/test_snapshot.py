@@ -67,3 +67,36 @@ def test_a_moment_handed_over_is_not_changed_by_later_steps() -> None:
         np.testing.assert_array_equal(m.state.ids, ids)
         assert m.state.t == t
     assert engine.t > moment.state.t and len(moment.state.ids) > 0
+
+
+def test_exits_and_packs_become_log_lines_once() -> None:
+    from cone_feeder_sim.feeder.runner import start_simulator
+    from cone_feeder_sim.formats.scenario_file import scenario_from_mapping
+    from cone_feeder_sim.physics.params import ModelParams
+    from cone_feeder_sim.view.snapshot import Watcher
+    from cone_feeder_sim.weigher.machine import Pack
+
+    class Machine:  # what the watcher reads of a weigher: its packs and hopper readings
+        packs: list[Pack] = []
+
+        def hopper_readings(self) -> np.ndarray:
+            return np.full(14, 0.25)
+
+    machine = Machine()
+    watcher = Watcher(ModelParams(), machine)  # type: ignore[arg-type]
+    scenario = scenario_from_mapping({'duration': 1.0, 'rotation': [[0.0, 0.0]], 'particles': [
+        {'position': [0.215, 0.0, 0.0], 'velocity': [1.0, 0.0, 0.0], 'on_surface': True}]})
+    sim = start_simulator(scenario)
+    step = sim.advance_to(0.05)
+    assert len(step.exits) == 1
+    machine.packs.append(Pack(index=1, t=0.04, mass=1.012, measured=1.0115, heads=(2, 7),
+                              giveaway=0.012))
+    moment, events = watcher.interval(0.05, sim, step)
+    channel = int(step.exits.channel[0])
+    assert [e.kind for e in events] == ['exit', 'pack']
+    assert events[0].text.startswith(f'piece 0 left into channel {channel} at ')
+    assert events[1].text == 'pack 1: 1012.0 g (giveaway +12.0 g), heads 2, 7'
+    assert moment.channel_mass[channel - 1] == ModelParams().product.m
+    np.testing.assert_array_equal(moment.hoppers, 0.25)
+    _, again = watcher.interval(0.1, sim, sim.advance_to(0.1))
+    assert again == []  # each exit and pack once
