@@ -21,6 +21,7 @@ times, pieces, mass balance), the recording, and, with a weigher, its pack stati
 functions here build them from plain values; the node only gathers and publishes them.
 """
 
+from dataclasses import dataclass
 from typing import Any
 
 from .pacing import Pacer
@@ -63,6 +64,47 @@ class DiagnosticsWindow:
         self.rejected = 0
         self.largest_island = 0
         self.pairs_left_out = 0
+
+    def count(self, result: TickResult, step_s: float, publish_s: float, period: float
+              ) -> None:
+        """Count a published tick: it took step_s (s) to run, publish_s (s) to publish."""
+        self.ticks += 1
+        self.step_s += step_s
+        self.step_max = max(self.step_max, step_s)
+        self.publish_s += publish_s
+        if period > 0.0 and step_s > period:
+            self.overruns += 1
+        self.accepted += result.stats.accepted
+        self.rejected += result.stats.rejected
+        self.largest_island = max(self.largest_island, result.stats.largest_island)
+        self.pairs_left_out = max(self.pairs_left_out, result.stats.pairs_left_out)
+
+
+@dataclass
+class RunTotals:
+    """
+    Counts since the node started.
+
+    ticks published; step_s, publish_s (s) wall time running and publishing them; exits and
+    failures of pieces; refused inputs; last_tick the last published tick's result.
+    """
+
+    ticks: int = 0
+    step_s: float = 0.0
+    publish_s: float = 0.0
+    exits: int = 0
+    failures: int = 0
+    refused: int = 0
+    last_tick: TickResult | None = None
+
+    def count(self, result: TickResult, step_s: float, publish_s: float) -> None:
+        """Count a published tick: it took step_s (s) to run, publish_s (s) to publish."""
+        self.ticks += 1
+        self.step_s += step_s
+        self.publish_s += publish_s
+        self.exits += len(result.exits)
+        self.failures += len(result.failures)
+        self.last_tick = result
 
 
 def _status(level: int, name: str, message: str, values: dict[str, str]) -> dict[str, Any]:

@@ -126,7 +126,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from .diagnostics import (
-    DiagnosticsWindow, recording_status, simulation_status, weigher_status)
+    DiagnosticsWindow, recording_status, RunTotals, simulation_status, weigher_status)
 from .guarded_node import GuardedNode
 from .pacing import Pacer
 from .parameters import (
@@ -241,13 +241,9 @@ class SimNode(GuardedNode):
         #: published ones, so a change takes effect from the tick its event names
         self._marker_rates: list[tuple[int, float]] = []
         self._paused = False
-        self._total_exits = 0
-        self._total_failures = 0
-        self._refused = 0
-        self._last_tick: TickResult | None = None
+        self._totals = RunTotals()
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._window = DiagnosticsWindow(time.perf_counter(), self._engine.t)
-        self._timing = [0, 0.0, 0.0]  # ticks, step s, publish s since the start
         # the worker may be ticks ahead: the node's time is that of the last published tick
         # (stamps of events, received messages and diagnostics, so log times never go back)
         self._published_t = self._engine.t
@@ -378,8 +374,8 @@ class SimNode(GuardedNode):
             self.remove_message_hook(recorder.hook)
         recorder.close(end_metadata={
             'ticks': str(self._engine.tick_index), 'end_time': repr(self._engine.t),
-            'exits': str(self._total_exits), 'failures': str(self._total_failures),
-            'refused_inputs': str(self._refused)})
+            'exits': str(self._totals.exits), 'failures': str(self._totals.failures),
+            'refused_inputs': str(self._totals.refused)})
         files = ', '.join(str(p) for p in recorder.paths)
         if recorder.error is not None:
             self._recording_error = str(recorder.error)
@@ -473,7 +469,7 @@ class SimNode(GuardedNode):
         The refusal is an event on ~/events (so it is in the recording); the log line
         (``text``, default ``<what> refused: <reason>``) is throttled.
         """
-        self._refused += count
+        self._totals.refused += count
         # at most one line a second per kind of refusal (rclpy throttles per call site)
         key = (what, reason.split(':')[0][:40])
         now = time.monotonic()
@@ -541,12 +537,17 @@ class SimNode(GuardedNode):
     @property
     def timing(self) -> tuple[int, float, float]:
         """Return ticks run, wall seconds in engine ticks and in publishing, since the start."""
-        return self._timing[0], self._timing[1], self._timing[2]
+        return self._totals.ticks, self._totals.step_s, self._totals.publish_s
+
+    @property
+    def totals(self) -> RunTotals:
+        """Return the counts since the start: ticks, exits, failures, refused inputs."""
+        return self._totals
 
     @property
     def last_tick(self) -> TickResult | None:
         """Return the result of the last tick, if any."""
-        return self._last_tick
+        return self._totals.last_tick
 
     def _now_ns(self) -> int:
         """Return the node's time (ns): that of the last published tick."""
@@ -837,24 +838,9 @@ class SimNode(GuardedNode):
                 self._markers.rate = self._marker_rates.pop(0)[1]
             self._publish_tick(result)
             self._published_t, self._published_index = result.t, result.index + 1
-            done = time.perf_counter()
-            window = self._window
-            window.ticks += 1
-            window.step_s += seconds
-            window.step_max = max(window.step_max, seconds)
-            window.publish_s += done - stepped
-            if period > 0.0 and seconds > period:
-                window.overruns += 1
-            self._timing[0] += 1
-            self._timing[1] += seconds
-            self._timing[2] += done - stepped
-            window.accepted += result.stats.accepted
-            window.rejected += result.stats.rejected
-            window.largest_island = max(window.largest_island, result.stats.largest_island)
-            window.pairs_left_out = max(window.pairs_left_out, result.stats.pairs_left_out)
-            self._last_tick = result
-            self._total_exits += len(result.exits)
-            self._total_failures += len(result.failures)
+            publish_s = time.perf_counter() - stepped
+            self._window.count(result, seconds, publish_s, period)
+            self._totals.count(result, seconds, publish_s)
             for failure in result.failures:
                 self.get_logger().warning(
                     f'piece {failure.particle_id} removed at t = {failure.t:.6f} s: '
@@ -894,11 +880,11 @@ class SimNode(GuardedNode):
     def _publish_diagnostics(self) -> None:
         now = time.perf_counter()
         name = self.get_fully_qualified_name()
-        res = self._last_tick
+        res = self._totals.last_tick
         statuses = [
             simulation_status(name, self._window, now, self._engine, self._pacer,
-                              self._paused, res, self._total_exits, self._total_failures,
-                              self._refused),
+                              self._paused, res, self._totals.exits, self._totals.failures,
+                              self._totals.refused),
             recording_status(name, self._recorder, self._recording_error)]
         if res is not None and res.weigher_stats is not None:
             statuses.append(weigher_status(name, res.weigher_stats))

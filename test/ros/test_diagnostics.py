@@ -14,9 +14,9 @@
 
 """Tests of ros.diagnostics: the statuses sim_node publishes, from plain values."""
 
-from cone_feeder_sim.feeder.engine import EngineConfig, FeederEngine
+from cone_feeder_sim.feeder.engine import EngineConfig, FeederEngine, FeedParams, PieceSpec
 from cone_feeder_sim.ros.diagnostics import (
-    DiagnosticsWindow, recording_status, simulation_status, weigher_status)
+    DiagnosticsWindow, recording_status, RunTotals, simulation_status, weigher_status)
 from cone_feeder_sim.ros.pacing import Pacer
 from cone_feeder_sim.weigher.machine import WeigherStats
 
@@ -60,3 +60,19 @@ def test_recording_and_weigher_statuses() -> None:
     assert values(good)['giveaway mean (g)'] == '12.30'
     short = weigher_status('/n', WeigherStats(**{**stats.__dict__, 'below_tne': 0.1}))
     assert short['level'] == 1
+
+
+def test_window_and_totals_count_published_ticks() -> None:
+    engine = FeederEngine(EngineConfig(dt=0.02, feed=FeedParams(rate=0.0),
+                                       initial_pieces=(PieceSpec((0.215, 0.0, 0.03),
+                                                                 (1.0, 0.0, 0.0)),)))
+    window, totals = DiagnosticsWindow(wall=0.0, sim=0.0), RunTotals()
+    results = [engine.tick() for _ in range(3)]
+    for result, step_s in zip(results, (0.01, 0.03, 0.015)):
+        window.count(result, step_s, 0.002, 0.02)
+        totals.count(result, step_s, 0.002)
+    assert (window.ticks, window.overruns, window.step_max) == (3, 1, 0.03)
+    assert window.step_s == totals.step_s == 0.01 + 0.03 + 0.015
+    assert window.accepted == sum(r.stats.accepted for r in results) > 0
+    assert (totals.ticks, totals.exits, totals.failures) == (3, 1, 0)  # the piece left
+    assert totals.last_tick is results[-1] and totals.publish_s == 3 * 0.002

@@ -256,9 +256,9 @@ def test_channel_feed_sets_the_troughs(ros: Ros) -> None:
     assert ros.spin_until(lambda: len(sim.engine.pending) == 1, 20.0)
     sim.step()
     assert sim.engine.weigher.amplitude.tolist() == [0.5] * 7 + [0.0] * 7
-    refused = sim._refused
+    refused = sim.totals.refused
     pub.publish(Float64MultiArray(data=[1.0] * 3))  # not one per channel
-    assert ros.spin_until(lambda: sim._refused > refused, 20.0)
+    assert ros.spin_until(lambda: sim.totals.refused > refused, 20.0)
 
 
 def test_published_messages_carry_the_engine_state(ros: Ros) -> None:
@@ -304,7 +304,7 @@ def test_published_messages_carry_the_engine_state(ros: Ros) -> None:
     channel = latest(records, '/feeder1/channel_mass')
     assert channel['layout']['dim'] == [{'label': 'channel', 'size': 14, 'stride': 14}]
     np.testing.assert_allclose(channel['data'], total, rtol=0, atol=1e-12)
-    assert exits == sim._total_exits
+    assert exits == sim.totals.exits
 
 
 def test_pause_step_and_reset_services(ros: Ros) -> None:
@@ -352,11 +352,11 @@ def test_spawn_accepts_valid_poses_and_refuses_others(ros: Ros) -> None:
     records = collect(sim)
     pause(ros, sim)
     bad_frame = poses((0.05, 0.0, 0.05), frame='map')
-    assert publish_until(ros, 'spawn', bad_frame, lambda: sim._refused >= 1)
+    assert publish_until(ros, 'spawn', bad_frame, lambda: sim.totals.refused >= 1)
     mixed = poses((0.05, 0.0, 0.05), (0.5, 0.0, 0.05), (0.0, 0.05, -0.01),
                   (float('nan'), 0.0, 0.1), (-0.05, 0.02, 0.06), frame='')
     assert publish_until(ros, 'spawn', mixed, lambda: len(sim.engine.pending) >= 1)
-    assert sim._refused >= 4
+    assert sim.totals.refused >= 4
     step(ros, sim)
     res = sim.last_tick
     np.testing.assert_allclose(res.positions[0, 0], 0.1, atol=1e-3)
@@ -374,9 +374,9 @@ def test_rotation_commands_are_followed_and_non_finite_refused(ros: Ros) -> None
     sim = ros.sim(real_time_factor=0.0, max_angular_acceleration=50.0)
     records = collect(sim)
     assert publish_until(ros, 'rotation_cmd', Float64(data=math.nan),
-                         lambda: sim._refused >= 1)
+                         lambda: sim.totals.refused >= 1)
     assert publish_until(ros, 'rotation_cmd', Float64(data=math.inf),
-                         lambda: sim._refused >= 2)
+                         lambda: sim.totals.refused >= 2)
     assert publish_until(ros, 'rotation_cmd', Float64(data=4.0),
                          lambda: sim.last_tick is not None and sim.last_tick.mode == 'command'
                          and sim.last_tick.omega == pytest.approx(4.0))

@@ -123,7 +123,7 @@ def test_the_node_survives_random_input(tmp_path: Path, seed: int) -> None:
                     float(res.masses.sum()) + float(res.channel_mass.sum()) + res.failed_mass,
                     rel=1e-9)
                 balance_checked += 1
-        assert sim._refused > 0 and balance_checked > 0
+        assert sim.totals.refused > 0 and balance_checked > 0
         recording_path = sim.recording_path
     recording = open_recording(recording_path)
     assert recording.complete and recording.problem is None

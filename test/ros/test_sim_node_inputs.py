@@ -96,14 +96,14 @@ def test_a_spawn_beyond_max_pieces_is_refused_for_the_excess(ros: Ros) -> None:
     pub.publish(grid(5))
     assert ros.spin_until(lambda: len(sim.engine.pending) == 1, 20.0)
     pub.publish(grid(12))  # more than feed.max_pieces in one message: 4 refused at once
-    assert ros.spin_until(lambda: sim._refused >= 4, 20.0)
+    assert ros.spin_until(lambda: sim.totals.refused >= 4, 20.0)
     step(ros, sim)
     # the second request (8 after the node's cut) meets 5 pieces: 5 refused when applied
     assert sim.last_tick.count == 8
     refused = events(records, 'refused')
     assert [e['count'] for e in refused] == [4, 5]
     assert all('feed.max_pieces' in e['reason'] for e in refused)
-    assert sim._refused == 9
+    assert sim.totals.refused == 9
 
 
 def test_spawns_out_of_bounds_are_refused_and_recorded(ros: Ros) -> None:
@@ -113,7 +113,7 @@ def test_spawns_out_of_bounds_are_refused_and_recorded(ros: Ros) -> None:
     pub = ros.client.create_publisher(PoseArray, 'spawn', 10)
     pub.publish(sim_process.pose_array((0.05, 0.0, 1e300), (0.05, 0.0, math.inf),
                                        (0.05, 0.0, 0.3)))
-    assert ros.spin_until(lambda: sim._refused >= 2, 20.0)
+    assert ros.spin_until(lambda: sim.totals.refused >= 2, 20.0)
     reasons = ' '.join(e['reason'] for e in events(records, 'refused'))
     assert 'above the highest start 0.5 m' in reasons and 'not finite' in reasons
 
@@ -126,7 +126,7 @@ def test_a_million_poses_are_bounded_and_the_node_goes_on(ros: Ros) -> None:
     msg.header.frame_id = 'feeder'
     msg.poses = grid(1).poses * 1_000_000
     ros.client.create_publisher(PoseArray, 'spawn', 10).publish(msg)
-    assert ros.spin_until(lambda: sim._refused >= 999_000, 60.0)
+    assert ros.spin_until(lambda: sim.totals.refused >= 999_000, 60.0)
     step(ros, sim)
     assert sim.last_tick.count == 5 + 995  # the Table I pieces, then the room left
     refused = events(records, 'refused')
@@ -165,7 +165,7 @@ def test_a_full_input_queue_refuses_commands_resets_and_parameters(ros: Ros) -> 
     result = sim.set_parameters([Parameter('feed.rate', value=1.0)])[0]
     assert not result.successful and 'already waiting' in result.reason
     ros.client.create_publisher(Float64, 'rotation_cmd', 10).publish(Float64(data=1.0))
-    assert ros.spin_until(lambda: sim._refused >= 2, 20.0)
+    assert ros.spin_until(lambda: sim.totals.refused >= 2, 20.0)
     kinds = {e['input'] for e in events(records, 'refused')}
     assert {'reset', 'parameters', 'rotation_cmd'} <= kinds
     step(ros, sim)  # the queue empties with the tick; the node goes on
