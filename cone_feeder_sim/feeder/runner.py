@@ -80,6 +80,14 @@ def start_simulator(scenario: Scenario) -> Simulator:
     return sim
 
 
+def scenario_weigher(scenario: Scenario, weigher: Weigher | None = None) -> Weigher | None:
+    """Return the machine a run drives: None without a weigher section, else weigher or new."""
+    if scenario.weigher is None:
+        return None
+    return weigher if weigher is not None else Weigher(scenario.weigher,
+                                                       scenario.model.channels.count)
+
+
 def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
                  stop: Callable[[], bool] | None = None,
                  weigher: Weigher | None = None) -> RunResult:
@@ -102,10 +110,7 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
     feed = scenario.feed if scenario.feed is not None and scenario.feed.rate > 0.0 else None
     rng = np.random.default_rng(scenario.feed_seed)
     result = RunResult(pieces=len(scenario.particles))
-    if scenario.weigher is None:
-        weigher = None
-    elif weigher is None:
-        weigher = Weigher(scenario.weigher, scenario.model.channels.count)
+    weigher = scenario_weigher(scenario, weigher)
     k = 0
     while sim.t < scenario.duration and (sim.state.count or weigher is not None
                                          or feed is not None):

@@ -33,17 +33,21 @@ from .spec import FitSpec
 from .tracks import Tracks
 from ..feeder.runner import start_simulator
 from ..feeder.scenario import Scenario
-from ..formats.scenario_file import scenario_from_mapping
 from ..physics.simulation import Simulator
 
 __all__ = ['exit_residuals', 'FitProblem', 'predict', 'Residuals', 'residuals_of',
-           'SumOfSquares', 'trace']
+           'started', 'SumOfSquares', 'trace']
 
 
 def predict(scenario: Scenario, tracks: Tracks) -> np.ndarray:
     """Return the simulated positions (M, 3) (m, world frame) at the tracks' rows."""
+    return trace(*started(scenario), tracks.particle, tracks.t)[0]
+
+
+def started(scenario: Scenario) -> tuple[Simulator, np.ndarray]:
+    """Return a simulator at t = 0 with the scenario's pieces and their positions (P, 3) m."""
     start = np.array([spec.position for spec in scenario.particles], dtype=float)
-    return trace(start_simulator(scenario), start, tracks.particle, tracks.t)[0]
+    return start_simulator(scenario), start
 
 
 def trace(sim: Simulator, start: np.ndarray, particle: np.ndarray, t: np.ndarray,
@@ -87,12 +91,12 @@ def residuals_of(spec: FitSpec, values: np.ndarray) -> np.ndarray:
     Trajectory: predicted minus tracked positions (m), (M * 2,) or (M * 3,) with z.
     Exits: angle and time differences over their sigmas (:meth:`Exits.residuals`).
     """
-    scenario = scenario_from_mapping(spec.scenario_mapping(values), spec.base_dir)
+    scenario = spec.scenario(values)
     if spec.exits is not None:
         return exit_residuals(spec, scenario)[0]
     tracks = spec.tracks
     diff = predict(scenario, tracks) - tracks.xyz
-    return diff[:, :3 if tracks.has_z else 2].reshape(-1)
+    return diff[:, :tracks.columns].reshape(-1)
 
 
 def exit_residuals(spec: FitSpec, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
@@ -143,11 +147,11 @@ class FitProblem:
         self.simulations = 0
         self.window_simulations = 0  # multiple shooting's windows (:mod:`shooting`)
         self._lock = threading.Lock()
-        self._columns = 3 if spec.tracks.has_z else 2
+        self._columns = spec.tracks.columns
 
     def scenario(self, values: np.ndarray) -> Scenario:
         """Return the scenario with the free keys set to ``values``."""
-        return scenario_from_mapping(self.spec.scenario_mapping(values), self.spec.base_dir)
+        return self.spec.scenario(values)
 
     def residuals(self, values: np.ndarray) -> np.ndarray:
         """Return the residual vector at ``values`` (:func:`residuals_of`); count it."""

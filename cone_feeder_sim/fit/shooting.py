@@ -50,10 +50,9 @@ from typing import Any
 import numpy as np
 
 from .jacobian import Mapper
-from .problem import trace
+from .problem import started, trace
 from .spec import FitSpec
 from .tracks import Tracks
-from ..feeder.runner import start_simulator
 from ..feeder.scenario import Scenario
 from ..physics.params import product_row
 from ..physics.simulation import (
@@ -171,8 +170,7 @@ class WindowRun:
         t0, t1 = windows.edges[k], windows.edges[k + 1]
         ids = windows.pieces[k]
         if k == 0:
-            sim = start_simulator(scenario)
-            where = np.array([spec.position for spec in scenario.particles], dtype=float)
+            sim, where = started(scenario)
         else:
             params = SimParams(model=scenario.model, solver=scenario.solver)
             sim = Simulator(params, scenario.rotation, t0)
@@ -239,7 +237,7 @@ class Shooting:
         self._values = values
         self.mapper = mapper
         self.simulations = 0  # window simulations
-        self.columns = 3 if spec.tracks.has_z else 2
+        self.columns = spec.tracks.columns
         self.run_window = WindowRun(spec, windows, self.columns)
         self.params = len(spec.keys)
         self.sizes = [len(p) * UNKNOWNS for p in windows.pieces]

@@ -112,6 +112,10 @@ class FitSpec:
             mapping = set_scenario_key(mapping, scenario_key(key), float(value))
         return mapping
 
+    def scenario(self, values: Any) -> Scenario:
+        """Return the validated scenario with the free keys set to ``values``."""
+        return scenario_from_mapping(self.scenario_mapping(values), self.base_dir)
+
 
 def scenario_key(key: str) -> str:
     """Return the dotted scenario key of a free key (``rotation.2.omega`` -> ``rotation.2.1``)."""

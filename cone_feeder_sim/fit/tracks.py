@@ -59,6 +59,11 @@ class Tracks:
         """Tell whether the tracks give heights."""
         return bool(np.all(np.isfinite(self.xyz[:, 2])))
 
+    @property
+    def columns(self) -> int:
+        """Return how many coordinates a row compares: 3 with heights, else 2 (x, y)."""
+        return 3 if self.has_z else 2
+
     def __len__(self) -> int:
         """Return the number of observations."""
         return int(self.t.shape[0])

@@ -22,6 +22,7 @@ layouts: :mod:`cone_feeder_sim.formats.pointcloud`). Messages are plain mappings
 :mod:`cone_feeder_sim.formats.cdr` encodes; arrays are numpy arrays.
 """
 
+from dataclasses import dataclass
 import math
 from typing import Any
 
@@ -35,6 +36,8 @@ from ..weigher.machine import Pack
 
 __all__ = [
     'pose_array_positions',
+    'ChannelSector',
+    'channel_sectors',
     'MarkerBuilder',
     'MarkerSchedule',
     'channel_mass_message',
@@ -200,6 +203,51 @@ def _color(r: float, g: float, b: float, a: float = 1.0) -> dict[str, float]:
     return {'r': r, 'g': g, 'b': b, 'a': a}
 
 
+#: The channel sectors drawn outside the rim: ring from the rim to OUTER * r, numbers at
+#: LABEL * r; odd and even channels' colours (RGBA).
+SECTOR_OUTER = 1.15
+SECTOR_LABEL = 1.25
+SECTOR_SHADES = ((0.25, 0.55, 0.85, 0.9), (0.95, 0.75, 0.2, 0.9))
+
+
+@dataclass(frozen=True)
+class ChannelSector:
+    """
+    One channel's sector as the viewers draw it (the node's markers, the live view).
+
+    channel (1-based); start (rad) its first edge; ring (parts * 6, 3) m the triangles of the
+    ring outside the rim; label (3,) m where its number goes; shade (RGBA) its colour.
+    """
+
+    channel: int
+    start: float
+    ring: np.ndarray
+    label: tuple[float, float, float]
+    shade: tuple[float, float, float, float]
+
+
+def channel_sectors(model: ModelParams, parts: int = 8) -> list[ChannelSector]:
+    """Return the sector of every channel, in channel order, each ring cut into parts."""
+    r = model.r
+    sectors = []
+    for channel in range(1, model.channels.count + 1):
+        start, end = (math.radians(a) for a in model.channels.sector_edges(channel))
+        edge = np.linspace(start, end, parts + 1)
+        ring = []
+        for a0, a1 in zip(edge[:-1], edge[1:]):
+            inner0 = (r * math.cos(a0), r * math.sin(a0), 0.0)
+            inner1 = (r * math.cos(a1), r * math.sin(a1), 0.0)
+            outer0 = (SECTOR_OUTER * r * math.cos(a0), SECTOR_OUTER * r * math.sin(a0), 0.0)
+            outer1 = (SECTOR_OUTER * r * math.cos(a1), SECTOR_OUTER * r * math.sin(a1), 0.0)
+            ring += [inner0, outer0, outer1, inner0, outer1, inner1]
+        mid = 0.5 * (start + end)
+        sectors.append(ChannelSector(
+            channel=channel, start=start, ring=np.array(ring),
+            label=(SECTOR_LABEL * r * math.cos(mid), SECTOR_LABEL * r * math.sin(mid), 0.01),
+            shade=SECTOR_SHADES[0 if channel % 2 else 1]))
+    return sectors
+
+
 class MarkerSchedule:
     """
     When to publish markers: ``rate`` messages per simulated second, and on a reset.
@@ -262,31 +310,17 @@ class MarkerBuilder:
         tri[2::3, 1] = r * np.sin(angles[1:])
         markers = [self._marker('cone', 0, 11, points=tri,  # TRIANGLE_LIST
                                 color=_color(0.7, 0.72, 0.75, 0.8))]
-        channels = model.channels
-        ring = []
-        colors = []
-        labels = []
-        sub = 8
-        for channel in range(1, channels.count + 1):
-            start, end = (math.radians(a) for a in channels.sector_edges(channel))
-            edge = np.linspace(start, end, sub + 1)
-            shade = (0.25, 0.55, 0.85, 0.9) if channel % 2 else (0.95, 0.75, 0.2, 0.9)
-            for a0, a1 in zip(edge[:-1], edge[1:]):
-                inner0 = (r * math.cos(a0), r * math.sin(a0), 0.0)
-                inner1 = (r * math.cos(a1), r * math.sin(a1), 0.0)
-                outer0 = (1.15 * r * math.cos(a0), 1.15 * r * math.sin(a0), 0.0)
-                outer1 = (1.15 * r * math.cos(a1), 1.15 * r * math.sin(a1), 0.0)
-                ring += [inner0, outer0, outer1, inner0, outer1, inner1]
-                colors += [shade] * 6
-            mid = 0.5 * (start + end)
-            labels.append(self._marker(
-                'channel_labels', channel, 9,  # TEXT_VIEW_FACING
-                pose={'position': {'x': 1.25 * r * math.cos(mid), 'y': 1.25 * r * math.sin(mid),
-                                   'z': 0.01},
-                      'orientation': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0}},
-                scale={'x': 0.0, 'y': 0.0, 'z': 0.03}, text=str(channel)))
-        markers.append(self._marker('channels', 0, 11, points=np.array(ring),
-                                    colors=np.array(colors, dtype=np.float32)))
+        sectors = channel_sectors(model)
+        labels = [self._marker(
+            'channel_labels', sector.channel, 9,  # TEXT_VIEW_FACING
+            pose={'position': dict(zip('xyz', sector.label)),
+                  'orientation': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0}},
+            scale={'x': 0.0, 'y': 0.0, 'z': 0.03}, text=str(sector.channel))
+            for sector in sectors]
+        ring = np.concatenate([sector.ring for sector in sectors])
+        colors = np.array([sector.shade for sector in sectors
+                           for _ in range(sector.ring.shape[0])], dtype=np.float32)
+        markers.append(self._marker('channels', 0, 11, points=ring, colors=colors))
         return markers + labels
 
     def dynamic(self, head: dict[str, Any], angle: float, positions: np.ndarray

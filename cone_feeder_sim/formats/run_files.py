@@ -29,7 +29,7 @@ from pathlib import Path
 from .events_csv import EventsCsvWriter
 from .packs_csv import write_packs_csv
 from .runlog import ScenarioRecorder
-from ..feeder.runner import Progress, run_scenario, RunResult
+from ..feeder.runner import Progress, run_scenario, RunResult, scenario_weigher
 from ..feeder.scenario import Scenario
 from ..physics.simulation import Simulator, StepResult
 from ..weigher.machine import Weigher
@@ -59,10 +59,7 @@ def run_to_files(scenario: Scenario, events: str | Path, *, packs: str | Path | 
     drive when the scenario has one (default: a new one; a progress callback may watch it).
     """
     with contextlib.ExitStack() as outputs:
-        if scenario.weigher is None:
-            weigher = None
-        elif weigher is None:
-            weigher = Weigher(scenario.weigher, scenario.model.channels.count)
+        weigher = scenario_weigher(scenario, weigher)
         callbacks: list[Progress] = []
         if mcap is not None:
             callbacks.append(outputs.enter_context(contextlib.closing(ScenarioRecorder(

@@ -65,7 +65,7 @@ def top_view(positions: np.ndarray, radii: np.ndarray, kinds: np.ndarray, radius
     radius (m): the cone's; channels: the channel layout (world frame); angle (rad): the
     cone's angle phi.
     """
-    image = _background(size, float(radius), channels.count, float(channels.boundary)).copy()
+    image = _background(size, float(radius), channels).copy()
     scale = pixels_per_metre(radius, size)
     along = np.linspace(0.6 * radius, radius, max(2, int(0.8 * radius * scale)))
     for side in (-0.5, 0.5):  # the mark: a radial line two pixels wide at the angle phi
@@ -88,7 +88,7 @@ def top_view(positions: np.ndarray, radii: np.ndarray, kinds: np.ndarray, radius
 
 
 @functools.lru_cache(maxsize=8)
-def _background(size: int, radius: float, count: int, boundary: float) -> np.ndarray:
+def _background(size: int, radius: float, channels: ChannelLayout) -> np.ndarray:
     """Return the picture without pieces and mark (read-only): it is drawn once."""
     image = np.empty((size, size, 3), dtype=np.uint8)
     image[:] = BACKGROUND
@@ -100,8 +100,8 @@ def _background(size: int, radius: float, count: int, boundary: float) -> np.nda
     image[rho < radius] = CONE
     bearing = np.arctan2(y, x)
     outside = (rho >= radius) & (rho < radius / RIM_SHARE)
-    for k in range(count):
-        edge = math.radians(boundary + 360.0 * k / count)
+    for k in range(channels.count):
+        edge = math.radians(channels.boundary + 360.0 * k / channels.count)
         gap = np.abs(np.angle(np.exp(1j * (bearing - edge))))
         image[outside & (gap * rho < 1.0 / scale)] = BOUNDARY
     image.setflags(write=False)

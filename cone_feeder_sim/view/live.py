@@ -82,7 +82,7 @@ class LiveView:
     else feed it with :meth:`__call__` (the runner's progress callback), :meth:`ticked`
     (after an engine's ticks) or :meth:`show`.
     Counters for benchmarks: ``frames`` published, ``publish_seconds`` spent publishing
-    (wall, on the view's thread), ``frame_times`` (monotonic s) of the last 1,000 frames.
+    (wall, on the view's thread).
     """
 
     def __init__(self, source: FeederEngine | ModelParams, *, weigher: Weigher | None = None,
@@ -127,7 +127,6 @@ class LiveView:
         self.period = 1.0 / fps
         self.frames = 0
         self.publish_seconds = 0.0
-        self.frame_times: list[float] = []
         #: The error that stopped the frame thread (the run goes on; the view freezes).
         self.error: BaseException | None = None
         self._sent: Snapshot | Moment | None = None
@@ -226,8 +225,6 @@ class LiveView:
                            else snapshot)
             self._publish(self._shown)
             self.frames += 1
-            self.frame_times.append(start)
-            del self.frame_times[:-1000]
         elif resend and self._shown is not None:  # e.g. a client after the run's end
             self._publish(self._shown)
         self.publish_seconds += time.monotonic() - start

@@ -36,7 +36,9 @@ from .frame import PALETTE
 from .snapshot import Event, Snapshot
 from .topics import FRAME
 from ..formats.messages import (
-    channel_mass_message, cone_state_message, header, hopper_weights_message, stamp)
+    channel_mass_message, channel_sectors, cone_state_message, header, hopper_weights_message,
+    SECTOR_OUTER, SECTOR_SHADES, stamp)
+from ..formats.runlog import to_jsonable
 from ..physics.params import ModelParams
 
 __all__ = ['SceneBuilder', 'log_message', 'series_messages', 'timestamp']
@@ -45,8 +47,6 @@ _UPRIGHT = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
 _CONE = Color(r=0.7, g=0.72, b=0.75, a=0.8)
 _BOUNDARY = Color(r=0.35, g=0.35, b=0.35, a=1.0)
 _MARK = Color(r=0.1, g=0.1, b=0.1, a=1.0)
-#: The channel sectors' colours, odd and even channels (as the node's markers).
-_SECTORS = (Color(r=0.25, g=0.55, b=0.85, a=0.9), Color(r=0.95, g=0.75, b=0.2, a=0.9))
 _CONTACT = Color(r=0.0, g=0.0, b=0.0, a=1.0)
 #: Piece colours by product index (cycled): the top view's palette.
 _PIECES = tuple(Color(r=r / 255.0, g=g / 255.0, b=b / 255.0, a=1.0) for r, g, b in PALETTE)
@@ -62,18 +62,6 @@ def _pose(x: float, y: float, z: float) -> Pose:
     return Pose(position=Vector3(x=x, y=y, z=z), orientation=_UPRIGHT)
 
 
-def _ring(inner: float, outer: float, start: float, end: float, parts: int = 8
-          ) -> list[Point3]:
-    """Return the triangles (6 points a part) of the ring sector from start to end (rad)."""
-    points = []
-    edges = [start + (end - start) * k / parts for k in range(parts + 1)]
-    for a0, a1 in zip(edges[:-1], edges[1:]):
-        i0, i1, o0, o1 = ((radius * math.cos(a), radius * math.sin(a))
-                          for radius, a in ((inner, a0), (inner, a1), (outer, a0), (outer, a1)))
-        points += [Point3(x=x, y=y, z=0.0) for x, y in (i0, o0, o1, i0, o1, i1)]
-    return points
-
-
 class SceneBuilder:
     """The SceneUpdate of a snapshot, with the static entity of the model built once."""
 
@@ -84,26 +72,23 @@ class SceneBuilder:
         cone = CylinderPrimitive(pose=_pose(0.0, 0.0, 0.5 * h),
                                  size=Vector3(x=2.0 * r, y=2.0 * r, z=h),
                                  bottom_scale=1.0, top_scale=0.0, color=_CONE)
-        channels = model.channels
-        points = []
-        texts = []
-        sectors: tuple[list[Point3], list[Point3]] = ([], [])  # odd, even channels
-        for channel in range(1, channels.count + 1):
-            start, end = (math.radians(a) for a in channels.sector_edges(channel))
-            for radius in (r, 1.15 * r):
-                points.append(Point3(x=radius * math.cos(start), y=radius * math.sin(start),
-                                     z=0.0))
-            sectors[channel % 2 == 0].extend(_ring(r, 1.15 * r, start, end))
-            mid = 0.5 * (start + end)
-            texts.append(TextPrimitive(pose=_pose(1.25 * r * math.cos(mid),
-                                                  1.25 * r * math.sin(mid), 0.01),
-                                       billboard=True, font_size=0.03, scale_invariant=False,
-                                       color=_MARK, text=str(channel)))
+        sectors = channel_sectors(model)
+        points = [Point3(x=radius * math.cos(sector.start), y=radius * math.sin(sector.start),
+                         z=0.0)
+                  for sector in sectors for radius in (r, SECTOR_OUTER * r)]
+        texts = [TextPrimitive(pose=_pose(*sector.label), billboard=True, font_size=0.03,
+                               scale_invariant=False, color=_MARK, text=str(sector.channel))
+                 for sector in sectors]
+        rings = []  # odd and even channels, one primitive each
+        for red, green, blue, alpha in SECTOR_SHADES:
+            ring = np.concatenate([sector.ring for sector in sectors
+                                   if sector.shade == (red, green, blue, alpha)])
+            rings.append(TriangleListPrimitive(
+                pose=_pose(0, 0, 0), color=Color(r=red, g=green, b=blue, a=alpha),
+                points=[Point3(x=x, y=y, z=z) for x, y, z in ring.tolist()]))
         boundaries = LinePrimitive(type=LinePrimitiveLineType.LineList, pose=_pose(0, 0, 0),
                                    thickness=0.003, scale_invariant=False, points=points,
                                    color=_BOUNDARY)
-        rings = [TriangleListPrimitive(pose=_pose(0, 0, 0), points=ring, color=shade)
-                 for ring, shade in zip(sectors, _SECTORS)]
         self._static = (cone, boundaries, texts, rings)
 
     def update(self, snapshot: Snapshot) -> SceneUpdate:
@@ -142,20 +127,7 @@ def series_messages(snapshot: Snapshot) -> dict[str, dict[str, Any]]:
         'channel_mass': channel_mass_message(snapshot.channel_mass)}
     if snapshot.hoppers is not None:
         messages['hopper_weights'] = hopper_weights_message(snapshot.hoppers)
-    return {key: _plain(message) for key, message in messages.items()}
-
-
-def _plain(value: Any) -> Any:
-    """Return value with numpy arrays and scalars as lists and floats (for JSON)."""
-    if isinstance(value, dict):
-        return {key: _plain(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(item) for item in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
+    return {key: to_jsonable(message) for key, message in messages.items()}
 
 
 def log_message(event: Event) -> Log:
