@@ -19,4 +19,29 @@ The test tree mirrors the package (``test/physics``, ``test/feeder``, ``test/io`
 ``test/ros``, ``test/report``). The helpers shared between them (``reference_model``,
 ``msg_compare``, ``sim_process``) stay in ``test/``; pytest puts the directory of this file
 on ``sys.path``, so the tests import them by name.
+
+The README's test command runs the tests on every core with pytest-xdist: each worker has a
+ROS domain of its own (``workers.py``), each test its own temporary directory and ports.
 """
+
+import os
+
+import numba
+import pytest
+from workers import worker_domains
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Give this process (an xdist worker) a ROS domain of its own, and one numba thread."""
+    del config
+    os.environ['ROS_DOMAIN_ID'] = str(worker_domains()[0])
+    if int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1')) > 1:
+        # the workers share the cores: numba's threads of two workers spinning on the same
+        # cores slow both several-fold. One thread each; the tests that compare thread
+        # counts set theirs (up to NUMBA_NUM_THREADS, which stays the machine's).
+        numba.set_num_threads(1)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Run the tests marked slow first, so that no worker finishes the run alone with one."""
+    items.sort(key=lambda item: item.get_closest_marker('slow') is None)

@@ -35,9 +35,11 @@ import functools
 import math
 from typing import Any
 
+import numba
 import numpy as np
-from reference_model import (
-    initial_state_on_feeder, omega_of_t, reference_rhs, static_friction, table2_params)
+from reference_model import (cone_geometry, cone_row, friction_of, initial_state_on_feeder,
+                             omega_of_t, PIECE_KEYS, piece_rhs_into, piece_row, readings,
+                             reference_rhs, static_friction, table2_params)
 from scipy.integrate import solve_ivp
 
 PAIR_KEYS = ('r_a', 'r_d', 'r_f', 'd', 'mu_C', 'mu_S', 'v_C', 'v_S', 'epsilon')
@@ -51,44 +53,128 @@ def pair_params(p_i: dict[str, Any], p_j: dict[str, Any]) -> dict[str, Any]:
 def reference_pair_force(q_i: np.ndarray, qd_i: np.ndarray, p_i: dict[str, Any],
                          q_j: np.ndarray, qd_j: np.ndarray, p_j: dict[str, Any],
                          omega: float, pull_off: float) -> np.ndarray:
-    """Return the contact force on piece i from piece j (N, world frame), shape (3,)."""
+    """
+    Return the contact force on piece i from piece j (N, world frame).
+
+    Vectors (3, ...): the components along the first axis, any further axes independent
+    pairs; parameter values scalars or arrays that broadcast with q_i[0].
+    """
     pair = pair_params(p_i, p_j)
     dq = np.asarray(q_i, dtype=float) - np.asarray(q_j, dtype=float)
-    dist = max(math.sqrt(float(dq @ dq)), 1e-9)
+    dist = np.maximum(np.sqrt(np.sum(dq * dq, axis=0)), 1e-9)
     n = dq / dist
     s0 = p_i['s0'] + p_j['s0']
     s_c = p_i['s_c_ratio'] * p_i['s0'] + p_j['s_c_ratio'] * p_j['s0']
-    r_t = 2.0 * math.atanh(pair['r_a']) / (s0 - s_c)
+    r_t = 2.0 * np.arctanh(pair['r_a']) / (s0 - s_c)
     r_c = (s0 + s_c) / 2.0
-    r_act = (1.0 - math.tanh(r_t * (dist - r_c))) / 2.0
+    r_act = (1.0 - np.tanh(r_t * (dist - r_c))) / 2.0
     u = (np.asarray(qd_i, dtype=float) - np.asarray(qd_j, dtype=float)
-         - omega * np.array([-dq[1], dq[0], 0.0]))
-    v_n = float(u @ n)
-    f_c = pair['r_f'] * (1.0 - math.tanh(pair['r_d'] * v_n)) / 2.0
+         - omega * np.stack([-dq[1], dq[0], np.zeros_like(dq[0])]))
+    v_n = np.sum(u * n, axis=0)
+    f_c = pair['r_f'] * (1.0 - np.tanh(pair['r_d'] * v_n)) / 2.0
     normal = r_act * f_c
-    adhesion = pull_off / math.cosh(min(r_t * abs(dist - s0), 350.0)) ** 2
+    adhesion = pull_off / np.cosh(np.minimum(r_t * np.abs(dist - s0), 350.0)) ** 2
     q_s = static_friction(u - v_n * n, r_act, normal, pair)
     return (normal - adhesion) * n + q_s
 
 
 def crowd_rhs(y: np.ndarray, params: list[dict[str, Any]], omega: float,
               pull_off: float) -> np.ndarray:
-    """Return dy/dt of the coupled system; y (9 n,) = the pieces' [q, qdot, Q_d] in order."""
+    """
+    Return dy/dt of the coupled system.
+
+    y (9 n,) = the pieces' [q, qdot, Q_d] in order, or (9 n, k): k such states at once
+    (scipy's vectorised calls, which make the finite-difference Jacobian one call). Every
+    piece is reference_rhs; every pair within reach adds reference_pair_force, equal and
+    opposite. Returns the shape of y.
+    """
     count = len(params)
-    states = y.reshape(count, 9)
-    out = np.concatenate([reference_rhs(0.0, states[i], params[i], omega)
-                          for i in range(count)]).reshape(count, 9)
-    for i in range(count):
-        for j in range(i + 1, count):
-            reach = params[i]['s0'] + params[j]['s0']
-            if float(np.sum((states[i, :3] - states[j, :3]) ** 2)) >= (2.0 * reach) ** 2:
-                continue  # the activation is below 1e-9 there: no force worth a call
-            f = reference_pair_force(states[i, :3], states[i, 3:6], params[i],
-                                     states[j, :3], states[j, 3:6], params[j], omega,
-                                     pull_off)
-            out[i, 3:6] += f / params[i]['m']
-            out[j, 3:6] -= f / params[j]['m']
-    return out.reshape(-1)
+    assert len({readings(p) for p in params}) == 1, 'a crowd takes one reading of the model'
+    columns = np.asarray(y, dtype=float).reshape(count, 9, -1).transpose(1, 0, 2)  # (9, n, k)
+    piece = {**params[0], **{key: np.array([p[key] for p in params])[:, None]
+                             for key in PIECE_KEYS}}
+    out = reference_rhs(0.0, columns, piece, omega)
+    first, second = np.triu_indices(count, 1)
+    if first.size:
+        q, qdot = columns[0:3], columns[3:6]
+        p_i = {key: value[first] for key, value in piece.items() if key in PIECE_KEYS}
+        p_j = {key: value[second] for key, value in piece.items() if key in PIECE_KEYS}
+        reach = p_i['s0'] + p_j['s0']
+        dq = q[:, first] - q[:, second]
+        # beyond twice the reach the activation is below 1e-9: no force there
+        near = np.sum(dq * dq, axis=0) < (2.0 * reach) ** 2
+        f = near * reference_pair_force(q[:, first], qdot[:, first], p_i, q[:, second],
+                                        qdot[:, second], p_j, omega, pull_off)
+        np.add.at(out[3:6], (slice(None), first), f / p_i['m'])
+        np.add.at(out[3:6], (slice(None), second), -f / p_j['m'])
+    return out.transpose(1, 0, 2).reshape(np.shape(y))
+
+
+@numba.njit(cache=True)
+def _compiled_crowd_rhs(y: np.ndarray, piece: np.ndarray, cone: np.ndarray, omega: float,
+                        pull_off: float) -> np.ndarray:
+    """
+    Return dy/dt (9 n, k) of crowd_rhs for y (9 n, k), in plain loops.
+
+    piece (n, 15): the PIECE_KEYS row of every piece; cone: reference_model.cone_row. The
+    default readings of the model (newton normal force, full friction direction) only. The
+    same equations as reference_pair_force, written out scalar by scalar so that numba
+    compiles them; test_reference_contacts checks the two against each other.
+    """
+    count, columns = piece.shape[0], y.shape[1]
+    out = np.empty_like(y)
+    for c in range(columns):
+        for i in range(count):
+            piece_rhs_into(out, y, 9 * i, c, piece[i], cone, omega, False, False)
+        for i in range(count):
+            for j in range(i + 1, count):
+                bi, bj = 9 * i, 9 * j
+                dx = y[bi, c] - y[bj, c]
+                dy = y[bi + 1, c] - y[bj + 1, c]
+                dz = y[bi + 2, c] - y[bj + 2, c]
+                reach = piece[i, 10] + piece[j, 10]
+                if dx * dx + dy * dy + dz * dz >= (2.0 * reach) ** 2:
+                    continue  # the activation is below 1e-9 there: no force worth a call
+                pair = 0.5 * (piece[i] + piece[j])
+                dist = max(math.sqrt(dx * dx + dy * dy + dz * dz), 1e-9)
+                nx, ny, nz = dx / dist, dy / dist, dz / dist
+                s0 = piece[i, 10] + piece[j, 10]
+                s_c = piece[i, 11] * piece[i, 10] + piece[j, 11] * piece[j, 10]
+                r_t = 2.0 * math.atanh(pair[12]) / (s0 - s_c)
+                r_act = (1.0 - math.tanh(r_t * (dist - 0.5 * (s0 + s_c)))) / 2.0
+                ux = y[bi + 3, c] - y[bj + 3, c] + omega * dy
+                uy = y[bi + 4, c] - y[bj + 4, c] - omega * dx
+                uz = y[bi + 5, c] - y[bj + 5, c]
+                v_n = ux * nx + uy * ny + uz * nz
+                normal = r_act * pair[14] * (1.0 - math.tanh(pair[13] * v_n)) / 2.0
+                adhesion = pull_off / math.cosh(min(r_t * abs(dist - s0), 350.0)) ** 2
+                qs = friction_of(ux - v_n * nx, uy - v_n * ny, uz - v_n * nz, r_act, normal,
+                                 pair)
+                f = ((normal - adhesion) * nx + qs[0], (normal - adhesion) * ny + qs[1],
+                     (normal - adhesion) * nz + qs[2])
+                for k in range(3):
+                    out[bi + 3 + k, c] += f[k] / piece[i, 6]
+                    out[bj + 3 + k, c] -= f[k] / piece[j, 6]
+    return out
+
+
+def compiled_crowd_rhs(params: list[dict[str, Any]], pull_off: float) -> Any:
+    """
+    Return fun(y, omega) = crowd_rhs(y, params, omega, pull_off), compiled.
+
+    y (9 n,) or (9 n, k) as crowd_rhs takes it. The solvers below use it; crowd_rhs (numpy)
+    is the readable definition it is checked against.
+    """
+    assert {readings(p) for p in params} == {(False, False)}, \
+        'the compiled crowd takes the default readings'
+    piece = np.array([piece_row(p) for p in params])
+    cone = cone_row(params[0])
+
+    def fun(y: np.ndarray, omega: float) -> np.ndarray:
+        columns = np.asarray(y, dtype=float).reshape(9 * len(params), -1)
+        return _compiled_crowd_rhs(columns, piece, cone, float(omega),
+                                   float(pull_off)).reshape(np.shape(y))
+    return fun
 
 
 def crowd_trajectory(params: list[dict[str, Any]], y0: np.ndarray, table: Any,
@@ -103,6 +189,7 @@ def crowd_trajectory(params: list[dict[str, Any]], y0: np.ndarray, table: Any,
     (default: t_end). Returns an object with t and y, y of shape (9 n, len(t)), and status.
     """
     atol = np.tile([1e-12] * 6 + [1e-10] * 3, len(params))
+    fun = compiled_crowd_rhs(params, pull_off)
     t_out = np.array([t_end] if t_eval is None else t_eval, dtype=float)
     cuts = sorted({0.0, t_end} | {float(t) for t, _ in table if 0.0 < t < t_end})
     y = np.asarray(y0, dtype=float).reshape(-1)
@@ -110,8 +197,9 @@ def crowd_trajectory(params: list[dict[str, Any]], y0: np.ndarray, table: Any,
     status = 0
     for t_a, t_b in zip(cuts[:-1], cuts[1:]):
         points = sorted({float(t) for t in t_out if t_a < t <= t_b} | {t_b})
-        sol = solve_ivp(lambda t, yy: crowd_rhs(yy, params, omega_of_t(table, t), pull_off),
-                        (t_a, t_b), y, method='Radau', rtol=rtol, atol=atol, t_eval=points)
+        sol = solve_ivp(lambda t, yy: fun(yy, omega_of_t(table, t)),
+                        (t_a, t_b), y, method='Radau', rtol=rtol, atol=atol, t_eval=points,
+                        vectorized=True)
         status = min(status, sol.status)
         found.update({float(t): sol.y[:, k] for k, t in enumerate(sol.t)})
         y = sol.y[:, -1]
@@ -131,7 +219,6 @@ def crowd_exits(params: list[dict[str, Any]], y0: np.ndarray, table: Any, t_end:
     every exit with the remaining pieces (a terminal event per piece) and at every
     breakpoint of the rotation table.
     """
-    from reference_model import cone_geometry
     r, _ = cone_geometry(params[0])
     alive = list(range(len(params)))
     y = {i: np.asarray(y0[i], dtype=float) for i in alive}
@@ -153,10 +240,10 @@ def crowd_exits(params: list[dict[str, Any]], y0: np.ndarray, table: Any, t_end:
             event.direction = 1.0  # type: ignore[attr-defined]
             events.append(event)
         atol = np.tile([1e-12] * 6 + [1e-10] * 3, len(alive))
-        sol = solve_ivp(lambda tt, yy, own=own: crowd_rhs(yy, own, omega_of_t(table, tt),
-                                                          pull_off),
+        fun = compiled_crowd_rhs(own, pull_off)
+        sol = solve_ivp(lambda tt, yy, fun=fun: fun(yy, omega_of_t(table, tt)),
                         (t, t_stop), np.concatenate([y[i] for i in alive]), method='Radau',
-                        rtol=rtol, atol=atol, events=events)
+                        rtol=rtol, atol=atol, events=events, vectorized=True)
         assert sol.status >= 0, sol.message
         t = float(sol.t[-1])
         state = sol.y[:, -1].reshape(len(alive), 9)

@@ -30,7 +30,11 @@ Conventions
   appears in the constraint (s_perp, v_perp and e_Fc). The exit test uses the true
   radius sqrt(q1**2 + q2**2).
 
-Only numpy and scipy are used; nothing is imported from the production package.
+Only numpy, scipy and numba are used; nothing is imported from the production package.
+The functions on numpy arrays (constraint_terms, static_friction, reference_rhs) are the
+readable definition; the solvers call ``compiled_rhs``, the same equations written out
+scalar by scalar for numba (a call costs microseconds instead of numpy's tens), which
+test_reference_model checks against them in every reading of the model.
 """
 
 import dataclasses
@@ -38,6 +42,7 @@ import itertools
 import math
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.integrate import OdeSolution, solve_ivp
@@ -120,91 +125,89 @@ def cone_geometry(p: dict[str, Any]) -> tuple[float, float]:
     return r, h
 
 
-def activation_constants(p: dict[str, Any]) -> tuple[float, float]:
+def activation_constants(p: dict[str, Any]) -> tuple[Any, Any]:
     """
     Return the transition coefficient r_t (1/m) and offset r_c (m), eqs. 32-33.
 
-    :param p: Parameter dict.
+    :param p: Parameter dict (values scalars, or arrays that broadcast: one per piece).
     :return: (r_t, r_c).
     """
     s0 = p['s0']
     s_c = p['s_c_ratio'] * s0
-    r_t = 2.0 * math.atanh(p['r_a']) / (s0 - s_c)
+    r_t = 2.0 * np.arctanh(p['r_a']) / (s0 - s_c)
     r_c = (s0 + s_c) / 2.0
     return r_t, r_c
 
 
 def constraint_terms(q: np.ndarray, qdot: np.ndarray, p: dict[str, Any]) -> dict[str, Any]:
     """
-    Evaluate the cone constraint quantities of eqs. 27-36 at one state.
+    Evaluate the cone constraint quantities of eqs. 27-36.
 
-    :param q: Position (3,), m.
-    :param qdot: Velocity (3,), m/s.
-    :param p: Parameter dict.
-    :return: Dict with s_perp, v_perp, e_Fc (3,), R_a, F_c (N) and rho (regularised).
+    Written on arrays: the vector components run along the first axis, any further axes
+    are independent states (pieces, or the columns scipy's solvers ask for at once).
+
+    :param q: Position (3, ...), m.
+    :param qdot: Velocity (3, ...), m/s.
+    :param p: Parameter dict (values scalars, or arrays broadcasting with q[0]).
+    :return: Dict with s_perp, v_perp, e_Fc (3, ...), R_a, F_c (N) and rho (regularised).
     """
     r, h = cone_geometry(p)
     r_t, r_c = activation_constants(p)
-    q1, q2, q3 = float(q[0]), float(q[1]), float(q[2])
-    qd1, qd2, qd3 = float(qdot[0]), float(qdot[1]), float(qdot[2])
+    q1, q2, q3 = q[0], q[1], q[2]
+    qd1, qd2, qd3 = qdot[0], qdot[1], qdot[2]
     eps_tip = p.get('tip_epsilon', 1e-4)
-    rho = math.sqrt(q1 * q1 + q2 * q2 + eps_tip * eps_tip)
+    rho = np.sqrt(q1 * q1 + q2 * q2 + eps_tip * eps_tip)
     # Eqs. 27-28: distance above the surface point straight below the particle.
     s_perp = q3 - h * (1.0 - rho / r)
     # Eq. 29: its time derivative.
     v_perp = qd3 + (h / r) * (q1 * qd1 + q2 * qd2) / rho
     # Eq. 36: d v_perp / d q_dot (not normalised).
-    e_fc = np.array([(h / r) * q1 / rho, (h / r) * q2 / rho, 1.0])
+    e_fc = np.stack(np.broadcast_arrays((h / r) * q1 / rho, (h / r) * q2 / rho, 1.0))
     # Eq. 31: activation function.
-    r_act = (1.0 - math.tanh(r_t * (s_perp - r_c))) / 2.0
+    r_act = (1.0 - np.tanh(r_t * (s_perp - r_c))) / 2.0
     # Eq. 35: constraint force magnitude F_c(v_perp).
-    f_c = p['r_f'] * (1.0 - math.tanh(p['r_d'] * v_perp)) / 2.0
+    f_c = p['r_f'] * (1.0 - np.tanh(p['r_d'] * v_perp)) / 2.0
     return {'s_perp': s_perp, 'v_perp': v_perp, 'e_Fc': e_fc, 'R_a': r_act, 'F_c': f_c,
             'rho': rho}
 
 
-def static_friction(v_dif: np.ndarray, r_act: float, normal: float,
+def static_friction(v_dif: np.ndarray, r_act: Any, normal: Any,
                     p: dict[str, Any]) -> np.ndarray:
     """
     Return the constraint-specific static friction force Q_s^c (N), eqs. 4-10.
 
-    :param v_dif: Relative velocity used for friction (3,), m/s.
-    :param r_act: Activation R_a (scales the viscous terms).
-    :param normal: Normal force magnitude N used in the Coulomb/Stribeck terms.
-    :param p: Parameter dict.
-    :return: Q_s^c (3,).
+    :param v_dif: Relative velocity used for friction (3, ...), m/s.
+    :param r_act: Activation R_a (scales the viscous terms), shape (...).
+    :param normal: Normal force magnitude N used in the Coulomb/Stribeck terms, (...).
+    :param p: Parameter dict (values scalars, or arrays broadcasting with r_act).
+    :return: Q_s^c (3, ...).
     """
-    v = math.sqrt(float(np.dot(v_dif, v_dif)))              # eq. 5
+    v = np.sqrt(np.sum(v_dif * v_dif, axis=0))               # eq. 5
     e_v = -v_dif / (v + p['epsilon'])                        # eq. 4
     d, v_c, v_s = p['d'], p['v_C'], p['v_S']
     mu_c, mu_s = p['mu_C'], p['mu_S']
     f_visc = r_act * d * v                                   # eq. 7, times R_a
-    f_coul = mu_c * normal * math.tanh(v / v_c)              # eq. 8
-    f_s_delta = (mu_s - mu_c * math.tanh(v_s / v_c)) * normal - r_act * d * v_s  # eq. 10
-    f_strib = f_s_delta * (v / v_s) * math.exp(0.5 - 0.5 * (v / v_s) ** 2)     # eq. 9
+    f_coul = mu_c * normal * np.tanh(v / v_c)                # eq. 8
+    f_s_delta = (mu_s - mu_c * np.tanh(v_s / v_c)) * normal - r_act * d * v_s  # eq. 10
+    f_strib = f_s_delta * (v / v_s) * np.exp(0.5 - 0.5 * (v / v_s) ** 2)       # eq. 9
     return (f_visc + f_coul + f_strib) * e_v
 
 
 def reference_rhs(t: float, y: np.ndarray, p: dict[str, Any], omega: float,
                   domega: float = 0.0) -> np.ndarray:
     """
-    Right-hand side of the combined model, eq. 38 with eq. 37, one particle.
+    Right-hand side of the combined model, eq. 38 with eq. 37.
 
     :param t: Time (s); unused, the model is autonomous given omega.
-    :param y: State (9,) = [q, q_dot, Q_d] in the world frame.
-    :param p: Parameter dict (see table2_params).
+    :param y: State (9, ...) = [q, q_dot, Q_d] in the world frame: one particle, or one
+        per further index (columns of a vectorised solver call, pieces of a crowd).
+    :param p: Parameter dict (values scalars, or arrays broadcasting with y[0]).
     :param omega: Cone angular velocity about +z at time t (rad/s).
     :param domega: Angular acceleration (rad/s^2); unused in the world frame.
-    :return: dy/dt (9,).
+    :return: dy/dt, the shape of y.
     """
     del t, domega
-    normal_mode = p.get('normal_force', 'newton')
-    direction_mode = p.get('friction_direction', 'full')
-    if normal_mode not in ('newton', 'literal'):
-        raise ValueError(f'normal_force must be newton or literal, got {normal_mode!r}')
-    if direction_mode not in ('full', 'tangential'):
-        raise ValueError(
-            f'friction_direction must be full or tangential, got {direction_mode!r}')
+    literal, tangential = readings(p)
     y = np.asarray(y, dtype=float)
     q = y[0:3]
     qdot = y[3:6]
@@ -212,36 +215,144 @@ def reference_rhs(t: float, y: np.ndarray, p: dict[str, Any], omega: float,
 
     # Eqs. 2-3: full 3-D relative velocity to the cone surface,
     # v_p = omega e_z x q = (-omega q2, omega q1, 0).
-    v_p = np.array([-omega * q[1], omega * q[0], 0.0])
+    v_p = np.stack([-omega * q[1], omega * q[0], np.zeros_like(q[0])])
     v_dif = qdot - v_p
-    v_dif_abs = math.sqrt(float(np.dot(v_dif, v_dif)))
+    v_dif_abs = np.sqrt(np.sum(v_dif * v_dif, axis=0))
 
     c = constraint_terms(q, qdot, p)
     r_act, f_c, e_fc = c['R_a'], c['F_c'], c['e_Fc']
 
     # Normal force magnitude inside the friction terms.
     normal = r_act * f_c
-    if normal_mode == 'literal':
+    if literal:
         normal = normal / p['r_f']
 
     # Velocity used by the friction law.
-    if direction_mode == 'tangential':
-        n = e_fc / math.sqrt(float(np.dot(e_fc, e_fc)))
-        v_fric = v_dif - float(np.dot(v_dif, n)) * n
+    if tangential:
+        n = e_fc / np.sqrt(np.sum(e_fc * e_fc, axis=0))
+        v_fric = v_dif - np.sum(v_dif * n, axis=0) * n
     else:
         v_fric = v_dif
 
     q_s = static_friction(v_fric, r_act, normal, p)
 
     # Eq. 14 with the full |v_dif| in every mode; eq. 37.
-    a = 1.0 - math.exp(-(v_dif_abs / p['qdot_F']) ** 2)
+    a = 1.0 - np.exp(-(v_dif_abs / p['qdot_F']) ** 2)
     dq_d = a / p['T_F'] * (q_s - q_d)
 
     # Eq. 38: Q_d + F_g + F_perp, F_perp = R_a F_c e_Fc (in newtons in every mode).
-    f_g = np.array([0.0, 0.0, -p['m'] * p['g']])
+    weight = np.broadcast_to(-p['m'] * p['g'], r_act.shape)
+    f_g = np.stack([np.zeros_like(weight), np.zeros_like(weight), weight])
     qddot = (q_d + f_g + r_act * f_c * e_fc) / p['m']
 
     return np.concatenate([qdot, qddot, dq_d])
+
+
+#: The parameters of one piece, in the order of the rows compiled_rhs takes.
+PIECE_KEYS: tuple[str, ...] = ('epsilon', 'd', 'mu_C', 'mu_S', 'v_C', 'v_S', 'm', 'T_F',
+                               'qdot_F', 'g', 's0', 's_c_ratio', 'r_a', 'r_d', 'r_f')
+
+
+def piece_row(p: dict[str, Any]) -> np.ndarray:
+    """Return the PIECE_KEYS values of p as one float row (15,)."""
+    return np.array([p[key] for key in PIECE_KEYS], dtype=float)
+
+
+def cone_row(p: dict[str, Any]) -> np.ndarray:
+    """Return [r, h, tip_epsilon] of p (m)."""
+    r, h = cone_geometry(p)
+    return np.array([r, h, p.get('tip_epsilon', 1e-4)])
+
+
+@numba.njit(cache=True)
+def friction_of(vx: float, vy: float, vz: float, r_act: float, normal: float,
+                p: np.ndarray) -> tuple[float, float, float]:
+    """static_friction for one velocity (3 floats); p a PIECE_KEYS row (its first six)."""
+    eps, d, mu_c, mu_s, v_c, v_s = p[0], p[1], p[2], p[3], p[4], p[5]
+    v = math.sqrt(vx * vx + vy * vy + vz * vz)
+    f_visc = r_act * d * v
+    f_coul = mu_c * normal * math.tanh(v / v_c)
+    f_s_delta = (mu_s - mu_c * math.tanh(v_s / v_c)) * normal - r_act * d * v_s
+    f_strib = f_s_delta * (v / v_s) * math.exp(0.5 - 0.5 * (v / v_s) ** 2)
+    scale = -(f_visc + f_coul + f_strib) / (v + eps)
+    return scale * vx, scale * vy, scale * vz
+
+
+@numba.njit(cache=True)
+def piece_rhs_into(out: np.ndarray, y: np.ndarray, b: int, c: int, p: np.ndarray,
+                   cone: np.ndarray, omega: float, literal: bool, tangential: bool) -> None:
+    """
+    Write reference_rhs of the piece in rows b..b+8 of column c of y into out (the same rows).
+
+    p: its PIECE_KEYS row; cone: cone_row; literal, tangential: the readings of the model.
+    """
+    r, h, tip_eps = cone[0], cone[1], cone[2]
+    m, t_f, qdot_f, g = p[6], p[7], p[8], p[9]
+    s0, s_c_ratio, r_a, r_d, r_f = p[10], p[11], p[12], p[13], p[14]
+    q0, q1, q2 = y[b, c], y[b + 1, c], y[b + 2, c]
+    qd0, qd1, qd2 = y[b + 3, c], y[b + 4, c], y[b + 5, c]
+    vx, vy, vz = qd0 + omega * q1, qd1 - omega * q0, qd2
+    rho = math.sqrt(q0 * q0 + q1 * q1 + tip_eps * tip_eps)
+    s_perp = q2 - h * (1.0 - rho / r)
+    v_perp = qd2 + (h / r) * (q0 * qd0 + q1 * qd1) / rho
+    s_c = s_c_ratio * s0
+    r_t = 2.0 * math.atanh(r_a) / (s0 - s_c)
+    r_act = (1.0 - math.tanh(r_t * (s_perp - 0.5 * (s0 + s_c)))) / 2.0
+    f_c = r_f * (1.0 - math.tanh(r_d * v_perp)) / 2.0
+    ex, ey = (h / r) * q0 / rho, (h / r) * q1 / rho
+    normal = r_act * f_c / r_f if literal else r_act * f_c
+    fx, fy, fz = vx, vy, vz
+    if tangential:
+        norm = math.sqrt(ex * ex + ey * ey + 1.0)
+        nx, ny, nz = ex / norm, ey / norm, 1.0 / norm
+        along = vx * nx + vy * ny + vz * nz
+        fx, fy, fz = vx - along * nx, vy - along * ny, vz - along * nz
+    qs = friction_of(fx, fy, fz, r_act, normal, p)
+    a = 1.0 - math.exp(-(math.sqrt(vx * vx + vy * vy + vz * vz) / qdot_f) ** 2)
+    e = (ex, ey, 1.0)
+    for k in range(3):
+        out[b + k, c] = y[b + 3 + k, c]
+        out[b + 6 + k, c] = a / t_f * (qs[k] - y[b + 6 + k, c])
+        out[b + 3 + k, c] = (y[b + 6 + k, c] + r_act * f_c * e[k]) / m
+    out[b + 5, c] -= g
+
+
+@numba.njit(cache=True)
+def _pieces_rhs(y: np.ndarray, p: np.ndarray, cone: np.ndarray, omega: float, literal: bool,
+                tangential: bool) -> np.ndarray:
+    """Return dy/dt (9, k) of one piece for y (9, k)."""
+    out = np.empty_like(y)
+    for c in range(y.shape[1]):
+        piece_rhs_into(out, y, 0, c, p, cone, omega, literal, tangential)
+    return out
+
+
+def readings(p: dict[str, Any]) -> tuple[bool, bool]:
+    """Return (literal normal force, tangential friction) of p, checked."""
+    normal_mode = p.get('normal_force', 'newton')
+    direction_mode = p.get('friction_direction', 'full')
+    if normal_mode not in ('newton', 'literal'):
+        raise ValueError(f'normal_force must be newton or literal, got {normal_mode!r}')
+    if direction_mode not in ('full', 'tangential'):
+        raise ValueError(
+            f'friction_direction must be full or tangential, got {direction_mode!r}')
+    return normal_mode == 'literal', direction_mode == 'tangential'
+
+
+def compiled_rhs(p: dict[str, Any]) -> Any:
+    """
+    Return fun(y, omega) = reference_rhs(t, y, p, omega), compiled.
+
+    y (9,) or (9, k): one state, or k at once (scipy's vectorised calls).
+    """
+    literal, tangential = readings(p)
+    row, cone = piece_row(p), cone_row(p)
+
+    def fun(y: np.ndarray, omega: float) -> np.ndarray:
+        columns = np.asarray(y, dtype=float).reshape(9, -1)
+        return _pieces_rhs(columns, row, cone, float(omega), literal,
+                           tangential).reshape(np.shape(y))
+    return fun
 
 
 def _check_table(table: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -416,6 +527,7 @@ def reference_trajectory(p: dict[str, Any], y0: ArrayLike,
     if r_exit and math.hypot(y[0], y[1]) >= r:
         raise ValueError('the particle starts outside the cone radius')
     atol_arr = DEFAULT_ATOL if atol is None else atol
+    fun = compiled_rhs(p)
 
     out_times = np.array(sorted({float(t) for t in ([] if t_out is None else t_out)}))
     if out_times.size and (out_times[0] < t_start or out_times[-1] > t_end):
@@ -444,10 +556,11 @@ def reference_trajectory(p: dict[str, Any], y0: ArrayLike,
 
         def rhs(t: float, yy: np.ndarray, w_a: float = w_a, slope: float = slope,
                 t_a: float = t_a) -> np.ndarray:
-            return reference_rhs(t, yy, p, w_a + slope * (t - t_a), slope)
+            return fun(yy, w_a + slope * (t - t_a))
 
         sol = solve_ivp(rhs, (t_a, t_b), y, method='Radau', rtol=rtol, atol=atol_arr,
-                        dense_output=True, events=rim if r_exit else None)
+                        dense_output=True, events=rim if r_exit else None,
+                        vectorized=True)
         if sol.status < 0:
             raise RuntimeError(f'solve_ivp failed on [{t_a}, {t_b}]: {sol.message}')
         n_rhs += int(sol.nfev)

@@ -22,7 +22,6 @@ Helpers for the node tests: a private rclpy Context with an executor and a clien
 from collections.abc import Callable, Sequence
 import os
 from pathlib import Path
-import random
 import signal
 import subprocess
 import time
@@ -33,17 +32,11 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from workers import random_domain
 
-#: Domain ids used by the process tests; one is drawn per run to isolate it.
-DOMAIN_RANGE = (100, 200)
 #: Generous wait for a fresh process's first message: it imports rclpy and loads (or, on
 #: the first start, compiles) the numba kernels.
 FIRST_MESSAGE_TIMEOUT = 120.0
-
-
-def random_domain() -> int:
-    """Return a ROS_DOMAIN_ID for one test run."""
-    return random.randint(*DOMAIN_RANGE)
 
 
 class SimProcess:

@@ -15,9 +15,10 @@
 """Smoke test of benchmarks/bench_node.py: it runs and prints its table (no timing checks)."""
 
 from pathlib import Path
-import random
 import subprocess
 import sys
+
+from workers import random_domain
 
 BENCH = Path(__file__).resolve().parent.parent / 'benchmarks' / 'bench_node.py'
 
@@ -26,7 +27,7 @@ def test_benchmark_runs_and_reports_rows() -> None:
     proc = subprocess.run(
         [sys.executable, str(BENCH), '--scenario', 'sliding', '--counts', '20', '40',
          '--ticks', '3', '--warmup', '1', '--cpu', '-1',
-         '--domain', str(random.randint(100, 200))],
+         '--domain', str(random_domain())],
         capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     rows = [line.split() for line in proc.stdout.splitlines() if not line.startswith('#')]

@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 import pytest
-from reference_contacts import crowd_trajectory
+from reference_contacts import compiled_crowd_rhs, crowd_rhs, crowd_trajectory
 from reference_model import table2_params
 from scipy.integrate import solve_ivp
 
@@ -84,3 +84,24 @@ def test_a_piece_on_another_rests_where_the_restriction_balances_its_weight() ->
     expected = r_c + math.atanh(1.0 - 2.0 * 2.0 * p['m'] * p['g'] / p['r_f']) / r_t
     assert gap == pytest.approx(expected, abs=2e-6)  # it creeps to it: 27 um off at 1.5 s
     assert y[1, 0] == y[1, 1] == 0.0  # and stays on the axis
+
+
+def test_the_compiled_crowd_is_the_numpy_one() -> None:
+    # the solvers run the compiled transcription: four pieces of three products near each
+    # other (touching, apart, sliding, nearly sticking), with adhesion, at random states
+    rng = np.random.default_rng(2)
+    params = [table2_params(1), table2_params(1, m=0.2, s0=0.03), table2_params(3),
+              table2_params(5)]
+    fun = compiled_crowd_rhs(params, 0.05)
+    states = np.array([np.concatenate([np.r_[0.1 + rng.uniform(-0.03, 0.03, 2),
+                                             rng.uniform(0.02, 0.05),
+                                             rng.normal(0.0, 0.3, 3) * rng.choice([1e-6, 1.0]),
+                                             rng.normal(0.0, 1.0, 3)] for _ in range(4)])
+                       for _ in range(300)]).T  # (36, 300)
+    for omega in (-8.0, 0.0, 5.5):
+        expected = crowd_rhs(states, params, omega, 0.05)
+        assert np.array_equal(expected[:, 11], crowd_rhs(states[:, 11], params, omega, 0.05))
+        scale = np.abs(expected).reshape(4, 3, 3, -1).max(axis=2).repeat(3, axis=1)
+        got = fun(states, omega)
+        assert (np.abs(got - expected) <= 1e-12 * scale.reshape(36, -1)).all()
+        assert np.array_equal(fun(states[:, 5], omega), got[:, 5])

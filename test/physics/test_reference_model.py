@@ -223,6 +223,26 @@ def test_tangential_friction_ignores_normal_motion() -> None:
     np.testing.assert_array_equal(full[0:6], tang[0:6])
 
 
+@pytest.mark.parametrize('reading', [{}, {'normal_force': 'literal'},
+                                     {'friction_direction': 'tangential'}])
+def test_the_compiled_rhs_is_the_numpy_one(reading: dict[str, str]) -> None:
+    # the solvers run the compiled transcription: at random states in and out of contact,
+    # sliding and nearly sticking, one at a time and vectorised, it equals reference_rhs
+    rng = np.random.default_rng(3)
+    p = rm.table2_params(2, **reading)
+    fun = rm.compiled_rhs(p)
+    states = np.array([np.r_[rng.uniform(-0.2, 0.2, 2), rng.uniform(0.0, 0.06),
+                             rng.normal(0.0, 0.3, 3) * rng.choice([1e-6, 1e-3, 1.0]),
+                             rng.normal(0.0, 1.0, 3)] for _ in range(300)]).T  # (9, 300)
+    for omega in (-8.0, 0.0, 5.5):
+        expected = rm.reference_rhs(0.0, states, p, omega)
+        scale = np.abs(expected).reshape(3, 3, -1).max(axis=1).repeat(3, axis=0)
+        # to round-off of each block (q', q'', Q_d') of each state
+        assert (np.abs(fun(states, omega) - expected) <= 1e-12 * scale).all()
+        one = fun(states[:, 7], omega)
+        assert one.shape == (9,) and np.array_equal(one, fun(states, omega)[:, 7])
+
+
 def test_invalid_options_raise() -> None:
     """Unknown model options are rejected."""
     y = np.r_[0.1, 0.0, 0.05, np.zeros(6)]

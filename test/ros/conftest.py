@@ -15,18 +15,18 @@
 """Fixtures of the node tests."""
 
 from collections.abc import Iterator
-import random
 
 import pytest
 import rclpy
 from rclpy.context import Context
+from workers import random_domain
 
 
 @pytest.fixture
 def context() -> Iterator[Context]:
-    """Return an rclpy context of its own (a random domain id), shut down afterwards."""
+    """Return an rclpy context of its own (a domain id of this worker's), shut down after."""
     ctx = Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    rclpy.init(context=ctx, domain_id=random_domain())
     try:
         yield ctx
     finally:

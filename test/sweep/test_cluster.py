@@ -35,6 +35,7 @@ import time
 
 from cone_feeder_sim.cli import main
 from cone_feeder_sim.sweep.cluster import dask_client, HEARTBEAT_FAILURE, quiet_heartbeat
+from cone_feeder_sim.sweep.job import write_job_files
 from cone_feeder_sim.sweep.run import run_sweep
 from cone_feeder_sim.sweep.spec import load_sweep
 from distributed import Client
@@ -45,38 +46,50 @@ BIN = Path(sys.executable).parent
 #: Generous caps on waiting for progress (processes start, load kernels, run jobs).
 START_TIMEOUT = 120.0
 SWEEP_TIMEOUT = 600.0
-#: Twelve touching pieces driven back and forth, then off the cone, with a weigher: each
-#: job is about a second of CPU on the development machine (contact makes it expensive), so
-#: that a worker is always in the middle of one.
-PIECES = [{'position': [0.03 + 0.01 * (i % 8) * math.cos(i),
-                        0.03 + 0.01 * (i % 8) * math.sin(i), 0.0], 'on_surface': True}
-          for i in range(12)]
-BASE = {'duration': 14.0, 'interactions': {'enabled': True},
-        'rotation': [[0.0, 0.0], [1.0, 4.0], [3.0, 4.0], [4.0, -4.0], [9.0, -4.0],
-                     [10.0, 9.0]],
+#: Eight touching pieces driven back and forth, then off the cone, with a weigher: each
+#: job is about half a second of CPU on the development machine, so that a worker is in the
+#: middle of one while the others finish, and every job has exits and packs to compare.
+PIECES = [{'position': [0.10 * math.cos(0.8 * i), 0.10 * math.sin(0.8 * i), 0.0],
+           'on_surface': True} for i in range(8)]
+BASE = {'duration': 7.0, 'interactions': {'enabled': True},
+        'rotation': [[0.0, 0.0], [0.5, 4.0], [1.5, 4.0], [2.0, -4.0], [3.0, -4.0],
+                     [3.5, 9.0]],
         'particles': PIECES, 'weigher': {'target': 0.3, 'transport_time': 1.0}}
 SWEEP = {'scenario': 'base.yaml',
          'grid': {'model.d': [30.0, 135.0, 225.0, 750.0], 'model.mu_C': [0.7, 0.85]}}
 
 
-@pytest.fixture
-def sweep_file(tmp_path: Path) -> Path:
-    (tmp_path / 'base.yaml').write_text(yaml.safe_dump(BASE))
-    path = tmp_path / 'sweep.yaml'
+@pytest.fixture(scope='module')
+def sweep_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    directory = tmp_path_factory.mktemp('sweep')
+    (directory / 'base.yaml').write_text(yaml.safe_dump(BASE))
+    path = directory / 'sweep.yaml'
     path.write_text(yaml.safe_dump(SWEEP))
     return path
 
 
-def serial_files(sweep_path: Path, out: Path, tmp_path: Path) -> dict[str, tuple[bytes, bytes]]:
-    """Run every job's scenario file of a sweep directory with cone-feeder-sim run."""
+@pytest.fixture(scope='module')
+def serial(sweep_file: Path,
+           tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[bytes, bytes]]:
+    """Run every job's scenario of the sweep with cone-feeder-sim run (once per module)."""
+    directory = tmp_path_factory.mktemp('serial')
     files = {}
-    for job in load_sweep(sweep_path).jobs:
-        events, packs = tmp_path / f'serial-{job.name}.csv', tmp_path / f'packs-{job.name}.csv'
-        scenario = out / 'jobs' / job.name / 'scenario.yaml'
+    for job in load_sweep(sweep_file).jobs:
+        (directory / job.name).mkdir()
+        scenario = write_job_files(job, directory / job.name)
+        events, packs = directory / f'events-{job.name}.csv', directory / f'packs-{job.name}.csv'
         assert main(['run', str(scenario), '--events', str(events), '--packs', str(packs),
                      '--quiet']) == 0
         files[job.name] = (events.read_bytes(), packs.read_bytes())
+    assert all(len(events.splitlines()) > 1 and len(packs.splitlines()) > 1
+               for events, packs in files.values())  # exits and packs to compare
     return files
+
+
+def ran_the_jobs_scenarios(sweep_path: Path, out: Path) -> bool:
+    """Tell whether each job directory holds the scenario the serial runs ran."""
+    return all((out / 'jobs' / job.name / 'scenario.yaml').read_text() == job.scenario
+               for job in load_sweep(sweep_path).jobs)
 
 
 def swept_files(out: Path, names) -> dict[str, tuple[bytes, bytes]]:
@@ -127,7 +140,7 @@ def scheduler(tmp_path: Path):
 
 
 def test_a_killed_worker_leaves_the_sweep_complete_and_identical(
-        scheduler, sweep_file: Path, tmp_path: Path) -> None:
+        scheduler, sweep_file: Path, serial: dict, tmp_path: Path) -> None:
     address, workers = scheduler
     out = tmp_path / 'out'
     with Client(address, timeout='60s') as client:
@@ -157,10 +170,8 @@ def test_a_killed_worker_leaves_the_sweep_complete_and_identical(
     assert '8 of 8 jobs done, 0 failed' in log
     # the kernels (the cone's and the weigher's) were loaded when the workers joined
     assert {r['kernel_loads'] for r in done.values()} == {0}
-    serial = serial_files(sweep_file, out, tmp_path)
+    assert ran_the_jobs_scenarios(sweep_file, out)
     assert swept_files(out, done) == serial
-    assert all(len(events.splitlines()) > 1 and len(packs.splitlines()) > 1
-               for events, packs in serial.values())  # exits and packs to compare
 
 
 def test_a_job_that_raises_fails_alone(scheduler, sweep_file: Path, tmp_path: Path) -> None:
@@ -188,7 +199,8 @@ def default_sigint() -> None:
 
 
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
-def test_an_interrupted_sweep_runs_only_its_missing_jobs(sweep_file: Path, tmp_path: Path,
+def test_an_interrupted_sweep_runs_only_its_missing_jobs(sweep_file: Path, serial: dict,
+                                                         tmp_path: Path,
                                                          signum: signal.Signals) -> None:
     out = tmp_path / 'out'
     command = [str(BIN / 'cone-feeder-sim'), 'sweep', str(sweep_file), '--out', str(out),
@@ -222,7 +234,8 @@ def test_an_interrupted_sweep_runs_only_its_missing_jobs(sweep_file: Path, tmp_p
             for name in finished} == stamps
     done = results(out)
     assert len(done) == 8 and {r['status'] for r in done.values()} == {'done'}
-    assert swept_files(out, done) == serial_files(sweep_file, out, tmp_path)
+    assert ran_the_jobs_scenarios(sweep_file, out)
+    assert swept_files(out, done) == serial
     with (out / 'summary.csv').open() as stream:
         assert stream.read().count('\n') == 9
     assert (out / 'summary.png').stat().st_size > 0
