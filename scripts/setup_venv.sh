@@ -10,6 +10,10 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install --disable-pip-version-check -q -r requirements/test.txt
 .venv/bin/python -m pip install --disable-pip-version-check -q --no-deps -e .
+# Byte-compile the package, as a regular pip install or a colcon build does (an editable
+# install leaves that to the first import, and not at all under PYTHONDONTWRITEBYTECODE):
+# every process the node and the tests start then imports it without compiling.
+.venv/bin/python -m compileall -q cone_feeder_sim > /dev/null
 # Compile the integration kernel into numba's cache now, so that no start has to (about
 # 10-60 s once; later starts load it in well under a second).
 .venv/bin/cone-feeder-sim compile

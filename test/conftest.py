@@ -35,6 +35,10 @@ def pytest_configure(config: pytest.Config) -> None:
     """Give this process (an xdist worker) a ROS domain of its own, and one numba thread."""
     del config
     os.environ['ROS_DOMAIN_ID'] = str(worker_domains()[0])
+    # Idle OpenMP threads (numba's threading layer here) sleep instead of spinning, which
+    # would take the cores the other workers need: set before numba starts its threads, for
+    # this process and the nodes, clusters and commands it starts.
+    os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')
     if int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1')) > 1:
         # the workers share the cores: numba's threads of two workers spinning on the same
         # cores slow both several-fold. One thread each; the tests that compare thread

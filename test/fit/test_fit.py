@@ -167,6 +167,7 @@ def test_tracks_are_sorted_and_z_is_optional(tmp_path: Path) -> None:
     assert not tracks.has_z and len(tracks) == 3
 
 
+@pytest.mark.slow
 def test_the_95_percent_intervals_cover_the_truth_over_20_seeds(tmp_path: Path) -> None:
     # noisy tracks of the same truth, 20 noise seeds: about 19 intervals of 20 should cover
     base = {**BASE, 'duration': 1.0, 'particles': BASE['particles'][:3]}
@@ -205,6 +206,7 @@ def test_a_recorded_run_is_a_test_subject(tmp_path: Path) -> None:
     assert d['estimate'] == pytest.approx(result.estimate[0], rel=1e-9)
 
 
+@pytest.mark.slow
 def test_the_global_search_finds_the_valley_the_local_one_misses(tmp_path: Path) -> None:
     base = {**BASE, 'duration': 2.0, 'particles': BASE['particles'][:3]}
     truth = set_scenario_key(set_scenario_key(base, 'model.d', 315.0), 'model.mu_C', 0.7225)
@@ -234,6 +236,7 @@ def test_a_rotation_knot_is_a_free_key(tmp_path: Path) -> None:
     assert abs(result.estimate[0] + 7.0) < 3.0 * result.stderr[0] < 0.01
 
 
+@pytest.mark.slow
 def test_multiple_shooting_converges_where_single_shooting_does_not(tmp_path: Path) -> None:
     # five pieces over 3 s, tracked until they leave; the start: d 3x too high, mu_C half
     truth = set_scenario_key(set_scenario_key(BASE, 'model.d', 315.0), 'model.mu_C', 0.7225)

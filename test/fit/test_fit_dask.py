@@ -29,14 +29,15 @@ from test_fit import BASE, FREE, write_tracks
 import yaml
 
 
+@pytest.mark.slow
 def test_a_fit_on_a_dask_cluster_is_the_fit_here(tmp_path: Path,
                                                  capsys: pytest.CaptureFixture) -> None:
-    base = {**BASE, 'duration': 1.0, 'particles': BASE['particles'][:3]}
+    base = {**BASE, 'duration': 0.6, 'particles': BASE['particles'][:3]}
     truth = set_scenario_key(set_scenario_key(base, 'model.d', 315.0), 'model.mu_C', 0.7225)
     write_tracks(tmp_path / 'tracks.csv', truth, 30.0, 0.001, 7, lose_exits=True)
     fits = [{'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'method': 'global',
              'global': {'popsize': 3, 'maxiter': 2}},
-            {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'segments': 0.5}]
+            {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'segments': 0.3}]
     here = [fit(FitProblem(fit_from_mapping(content, tmp_path))) for content in fits]
     (tmp_path / 'fit.yaml').write_text(yaml.safe_dump(fits[0]))
     with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:

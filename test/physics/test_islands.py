@@ -162,6 +162,7 @@ def crowd_at_the_rim() -> tuple[np.ndarray, dict, dict]:
     return positions, exits, reference
 
 
+@pytest.mark.slow
 def test_touching_pieces_exit_where_the_coupled_reference_says(crowd_at_the_rim) -> None:
     positions, exits, reference = crowd_at_the_rim
     # ids are given in order from 0; every piece leaves, as in the reference

@@ -46,12 +46,12 @@ BIN = Path(sys.executable).parent
 #: Generous caps on waiting for progress (processes start, load kernels, run jobs).
 START_TIMEOUT = 120.0
 SWEEP_TIMEOUT = 600.0
-#: Eight touching pieces driven back and forth, then off the cone, with a weigher: each
-#: job is about half a second of CPU on the development machine, so that a worker is in the
-#: middle of one while the others finish, and every job has exits and packs to compare.
+#: Eight pieces driven back and forth, then off the cone, with a weigher: each job is about
+#: a quarter of a second of CPU on the development machine, so that a worker is in the middle
+#: of one while another finishes, and every job has exits and packs to compare.
 PIECES = [{'position': [0.10 * math.cos(0.8 * i), 0.10 * math.sin(0.8 * i), 0.0],
            'on_surface': True} for i in range(8)]
-BASE = {'duration': 7.0, 'interactions': {'enabled': True},
+BASE = {'duration': 7.0, 'interactions': {'enabled': False},
         'rotation': [[0.0, 0.0], [0.5, 4.0], [1.5, 4.0], [2.0, -4.0], [3.0, -4.0],
                      [3.5, 9.0]],
         'particles': PIECES, 'weigher': {'target': 0.3, 'transport_time': 1.0}}
@@ -139,6 +139,7 @@ def scheduler(tmp_path: Path):
             proc.wait()
 
 
+@pytest.mark.slow
 def test_a_killed_worker_leaves_the_sweep_complete_and_identical(
         scheduler, sweep_file: Path, serial: dict, tmp_path: Path) -> None:
     address, workers = scheduler
@@ -199,12 +200,13 @@ def default_sigint() -> None:
 
 
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.slow
 def test_an_interrupted_sweep_runs_only_its_missing_jobs(sweep_file: Path, serial: dict,
                                                          tmp_path: Path,
                                                          signum: signal.Signals) -> None:
     out = tmp_path / 'out'
     command = [str(BIN / 'cone-feeder-sim'), 'sweep', str(sweep_file), '--out', str(out),
-               '--workers', '2']
+               '--workers', '1']
     # its own process group, as a command in a terminal: Ctrl-C (SIGINT) reaches the local
     # cluster's worker processes too; SIGTERM (kill) only the command
     first = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
