@@ -28,7 +28,7 @@ import os
 
 import numba
 import pytest
-from workers import worker_domains
+from workers import SHARED_ENV, worker_domains
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -44,6 +44,14 @@ def pytest_configure(config: pytest.Config) -> None:
         # cores slow both several-fold. One thread each; the tests that compare thread
         # counts set theirs (up to NUMBA_NUM_THREADS, which stays the machine's).
         numba.set_num_threads(1)
+
+
+@pytest.fixture(scope='session', autouse=True)
+def shared_directory(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Under xdist, name the directory the workers of this run share (workers.shared)."""
+    if os.environ.get('PYTEST_XDIST_WORKER'):
+        # each worker's base is <run>/popen-gwN: the run's directory is theirs alone
+        os.environ[SHARED_ENV] = str(tmp_path_factory.getbasetemp().parent)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -31,7 +31,6 @@ and are taken to turn with the cone, so u = (qdot_i - qdot_j) - omega z x (q_i -
 Coefficients of a pair are the means of the two pieces' values.
 """
 
-import functools
 import math
 from typing import Any
 
@@ -41,6 +40,7 @@ from reference_model import (cone_geometry, cone_row, friction_of, initial_state
                              omega_of_t, PIECE_KEYS, piece_rhs_into, piece_row, readings,
                              reference_rhs, static_friction, table2_params)
 from scipy.integrate import solve_ivp
+from workers import shared
 
 PAIR_KEYS = ('r_a', 'r_d', 'r_f', 'd', 'mu_C', 'mu_S', 'v_C', 'v_S', 'epsilon')
 
@@ -261,9 +261,9 @@ def crowd_exits(params: list[dict[str, Any]], y0: np.ndarray, table: Any, t_end:
 RIM_CROWD_TABLE = ((0.0, 0.0), (0.4, -8.0), (5.0, -8.0))
 
 
-@functools.cache
+@shared
 def rim_crowd_exits(positions: tuple[tuple[float, float, float], ...]) -> dict:
-    """Return the reference exits of the rim crowd at ``positions`` (computed once)."""
+    """Return the reference exits of the rim crowd at ``positions`` (computed once a run)."""
     y0 = np.array([initial_state_on_feeder(np.array(x), 0.0) for x in positions])
     return crowd_exits([table2_params(1)] * len(positions), y0, [list(r) for r in
                        RIM_CROWD_TABLE], 1.1, pull_off=0.05)
@@ -275,9 +275,9 @@ FOUR_TOUCHING_XY = ((0.06, 0.0), (0.105, 0.005), (0.15, 0.0), (0.08, 0.04))
 FOUR_TOUCHING_TABLE = ((0.0, 0.0), (0.3, -6.0), (5.0, -6.0))
 
 
-@functools.cache
+@shared
 def four_touching_at(positions: tuple[tuple[float, float, float], ...]) -> np.ndarray:
-    """Return the reference positions (4, 3) m at 0.4 s of the four pieces (computed once)."""
+    """Return the reference positions (4, 3) m at 0.4 s of the four pieces (once a run)."""
     y0 = np.array([initial_state_on_feeder(np.array(x), 0.0) for x in positions])
     return crowd_trajectory([table2_params(1)] * 4, y0, [list(r) for r in FOUR_TOUCHING_TABLE],
                             0.4, pull_off=0.05, t_eval=[0.4]).y[:, -1].reshape(4, 9)[:, :3]

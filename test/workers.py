@@ -13,15 +13,25 @@
 # limitations under the License.
 
 """
-What each pytest-xdist worker may use alone: its block of ROS domain ids.
+What each pytest-xdist worker has alone, and what the workers share.
 
 The README's test command runs the suite on every core (``-n auto``). Nodes of two workers
 on one ROS domain would hear each other, so every worker draws its domains from a block of
-its own; without xdist the one process has them all.
+its own; without xdist the one process has them all. Expensive references that tests of
+several files read are computed once per run and shared (``shared``).
 """
 
+from collections.abc import Callable
+import fcntl
+import functools
+import hashlib
 import os
+from pathlib import Path
+import pickle
 import random
+from typing import Any, TypeVar
+
+T = TypeVar('T')
 
 #: Domain ids the tests use, ends included (Fast DDS takes 0-232; the low ones are left to
 #: whatever else runs on the machine).
@@ -41,3 +51,36 @@ def worker_domains() -> range:
 def random_domain() -> int:
     """Return a ROS_DOMAIN_ID for one test run, from this worker's block."""
     return random.choice(worker_domains())
+
+
+#: The environment variable naming a directory that every worker of this run shares (set by
+#: the shared_directory fixture of conftest.py under xdist; unset: nothing shared).
+SHARED_ENV = 'CONE_FEEDER_SIM_TEST_SHARED'
+
+
+def shared(function: Callable[..., T]) -> Callable[..., T]:
+    """
+    Cache ``function``'s results for the whole test run, across the xdist workers.
+
+    For the expensive references that tests of several files read (a crowd's reference
+    solution): the first worker that needs a value computes it while holding a lock, the
+    others wait and read it back (pickled in the run's shared directory). Arguments must have
+    a stable repr. Without xdist, an in-memory cache.
+    """
+    memory = functools.cache(function)
+
+    @functools.wraps(function)
+    def wrapper(*args: Any) -> T:
+        directory = os.environ.get(SHARED_ENV)
+        if not directory:
+            return memory(*args)
+        key = hashlib.sha256(repr(args).encode()).hexdigest()[:20]
+        path = Path(directory) / f'{function.__module__}.{function.__qualname__}-{key}.pickle'
+        with path.with_suffix('.lock').open('w') as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not path.exists():
+                partial = path.with_suffix('.partial')
+                partial.write_bytes(pickle.dumps(function(*args)))
+                partial.replace(path)
+        return pickle.loads(path.read_bytes())
+    return functools.cache(wrapper)

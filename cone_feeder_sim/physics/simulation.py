@@ -630,6 +630,10 @@ def _failure(state: SimState, profile: RotationProfile, y: np.ndarray, i: int, t
 def _exit_events(state: SimState, params: SimParams, profile: RotationProfile, y: np.ndarray,
                  status: np.ndarray, t_event: np.ndarray) -> ExitEvents:
     idx = np.flatnonzero(status == EXITED)
+    if not idx.size:  # most intervals: nothing to locate (the same empty arrays, sooner)
+        return ExitEvents(ids=state.ids[idx], t=t_event[idx], angle_deg=np.zeros(0),
+                          channel=np.zeros(0, dtype=np.int64), position=np.zeros((0, 3)),
+                          velocity=np.zeros((0, 3)), mass=np.zeros(0))
     positions = np.zeros((idx.size, 3))
     velocities = np.zeros((idx.size, 3))
     for j, i in enumerate(idx):
