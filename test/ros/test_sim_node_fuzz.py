@@ -82,7 +82,7 @@ def test_the_node_survives_random_input(tmp_path: Path, seed: int) -> None:
         overrides = [Parameter('record_path', value=str(path)),
                      Parameter('real_time_factor', value=0.0),
                      Parameter('feed.rate', value=20.0),
-                     Parameter('feed.max_pieces', value=80)]
+                     Parameter('feed.max_pieces', value=40)]
         sim = ros.add(SimNode(context=ros.context, parameter_overrides=overrides))
         node = ros.client
         cmd = node.create_publisher(Float64, 'rotation_cmd', 10)
