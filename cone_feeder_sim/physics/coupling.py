@@ -15,39 +15,43 @@
 """
 Multirate coupling of pieces that touch: each piece at its own pace (compiled).
 
-The pair forces are slow in position and stiff in velocity; each piece's own friction is
-what sets its step size. So the pieces are coupled over coupling intervals of length H,
-much longer than their own steps, by an operator split (doc/model.md, "Multirate
-coupling"):
+The soft pair law (:mod:`.contact`) is slow next to a piece's own friction dynamics: two
+pieces of raw meat touch for 25-100 ms, while a piece's friction filter acts in 0.3 ms. So
+every piece keeps its own adaptive RODAS4 steps, and the pair forces couple the pieces
+over coupling intervals of length H, chosen by the contact time and by error control (an
+explicit co-simulation with extrapolated coupling forces; Busch & Schweizer's
+macro-step control). One interval [t, t + H]:
 
-1. **Predict, implicitly.** One linearly implicit Euler step of the whole coupled system
-   over H, (I/H - J) k = f, with J every piece's own exact Jacobian plus the pair blocks
-   (central differences, equal and opposite). It is solved through the velocities
-   (3 n unknowns, one 3x3 block per piece and one per pair) by BiCGSTAB with a block-Jacobi
-   preconditioner: O(n) per iteration, whatever the crowd's size or shape.
-2. **The pair forces over the interval** are each pair's force at the predicted end,
-   linearised: F_q = F_q(y) + G_q (k_i - k_j). This is backward Euler for the pair terms, so
-   the stiff relative velocities are damped, not rung. Each piece gets the sum of its pairs'
-   forces as a load: it ramps from its last value over the first RAMP of the interval to a
-   plateau chosen so that the impulse is F_q H (a jump would ring the piece). The two
-   pieces of a pair get exactly opposite loads.
-3. **Each piece alone.** Every piece is integrated over the interval with the load by the
-   per-piece kernel (:func:`integrator.advance_particle`): its own RODAS4 steps, step
-   control, kinks and exit location, as when it is alone. The pieces run in parallel.
-4. **Error control.** The load stands for the impulse of a pair force that changes over the
-   interval. The raw estimate of the impulse error per piece, as a velocity (m/s), is the
-   difference between the load and the trapezoidal rule on the pair forces at the start
-   and the end, H/m sum (F_used - (F(y0) + F(y1))/2) over its pairs, with y1 the states
-   the pieces reached. As in stiff integrators (Shampine), it is filtered through
-   (I - H J)^-1 of the coupled system, the prediction's own matrix: in the stiff directions,
-   where the implicit prediction is right and the trapezoidal rule is not, the raw estimate
-   is damped. The interval is accepted where the largest position part of the filtered
-   error (m) is within the tolerance, and the next one is sized for the split's order 1
-   (local error O(H^2)). A rejected interval is a result: every piece goes back to the
-   interval's start and it is tried again shorter.
+1. **Predict.** Each pair's force at t + H is the law evaluated at the pair's state
+   extrapolated to t + H: positions by their velocities and accelerations (the secant of
+   each piece's velocity over the last interval; zero at a tick's first), the history by
+   the extrapolated tangential displacement. The law's own shape (Hertz's delta^3/2, the
+   damping, the cap) is thus kept; only the pieces' paths are extrapolated.
+2. **Each piece alone.** A pair's load is linear over the interval, from the value it had
+   at the end of the last interval (a load never jumps: a jump rings the lightly damped
+   friction filter of a sticking piece) to the prediction. Each piece integrates the
+   interval with the sum of its pairs' loads (:func:`.integrator.advance_particle`): its
+   own steps, step control, kinks and exit location, as when it is alone. The pieces run
+   in parallel. The two pieces of a pair get exactly opposite loads, so their impulses are
+   equal and opposite whatever steps they take: momentum to round-off.
+3. **Correct.** The pair's history takes the pair's actual relative displacement over the
+   interval (the integral of the tangential relative velocity, exactly), turned into the
+   end's tangent plane and capped (:func:`.contact.history_update`); the pair's force at
+   the end is the law at the pieces' actual states.
+4. **Error control.** The impulse the load gave over the interval, H (L0 + L1) / 2, is
+   held against the trapezoidal rule on the actual forces at both ends; the difference
+   over a piece's mass is a velocity error, and H times it a position error. The interval
+   is accepted where the largest is within ``coupling_tolerance`` (m), and the next one
+   is sized for the error's order (O(H^4)). A rejected interval is a result: every piece
+   goes back to the interval's start and it is tried again shorter.
 
-Momentum: a pair's two loads are equal and opposite at every instant, so the impulses they
-give over an interval are equal and opposite whatever steps the two pieces take.
+**Intervals and the contact time.** No interval is longer than 1/omega of any touching
+pair, omega = sqrt(S_n / m*) (its natural frequency at the current overlap), nor longer
+than the time a pair that is still apart needs to touch at its closing speed (at least an
+eighth of the interval tried): a collision of glass spheres (microseconds) is resolved as
+a collision of raw meat (tens of milliseconds) is, only in shorter intervals.
+
+Every pair within reach is coupled at every interval; nothing is cut.
 """
 
 import math
@@ -55,42 +59,39 @@ import math
 import numba
 import numpy as np
 
-from .contact import pair_force, pair_jacobian
+from .contact import contact_force, history_update
+from .contact.law import pair_constants
 from .integrator import ACTIVE, advance_particle, GROUPS, STAT_REASON
-from .model import jacobian, rhs, STATE_SIZE
-from .params import G_EPS, P_M
-from .rosenbrock import eliminate_filter, factor3, solve3
+from .model import STATE_SIZE
+from .params import P_M
 
 __all__ = ['advance_coupled', 'COUPLING_STAT_WIDTH', 'CST_ACCEPTED', 'CST_FORCED',
-           'CST_ITERATIONS', 'CST_REJECTED']
+           'CST_REJECTED']
 
 jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 pjit = numba.njit(cache=True, error_model='numpy', nogil=True, parallel=True)
 
-#: Relative residual at which the velocity system of the prediction is solved.
-SOLVE_RTOL = 1.0e-10
-#: Most BiCGSTAB iterations; an unsolved system rejects the interval.
-SOLVE_MAX_ITERATIONS = 400
-#: Step control of the coupling intervals (the split is of order 1: local error O(H^2)).
+#: Step control of the coupling intervals (the position error is O(H^4)).
 SAFETY = 0.9
 FAC_MIN = 0.2
 FAC_MAX = 4.0
+ORDER = 4.0
 #: Intervals shorter than this (s) are accepted whatever their estimate (counted as forced).
-H_FLOOR = 1.0e-7
+H_FLOOR = 1.0e-9
+#: An interval never exceeds this many times 1/omega of a touching pair.
+OMEGA_CAP = 1.0
+#: A pair about to touch cuts the interval at its touch time, but not below this fraction
+#: of the interval tried.
+TOUCH_FRACTION = 0.125
 #: Crowds of fewer pieces are advanced on one thread: starting a parallel region costs more
 #: than it saves, and far more on a loaded machine (every interval starts one).
 PARALLEL_PIECES = 16
-#: The load ramps from its last value to the interval's plateau over this fraction of the
-#: interval, so that no piece sees a jump of its load (a jump rings each piece's lightly
-#: damped pre-sliding oscillation, which then costs it many steps).
-RAMP = 0.5
 
 # counters of one call (counters array, int64)
 CST_ACCEPTED = 0   # coupling intervals accepted
 CST_REJECTED = 1   # coupling intervals rejected (tried again shorter)
 CST_FORCED = 2     # intervals accepted at H_FLOOR although their estimate was above tolerance
-CST_ITERATIONS = 3  # BiCGSTAB iterations, all intervals
-COUPLING_STAT_WIDTH = 4
+COUPLING_STAT_WIDTH = 3
 
 
 @jit
@@ -127,238 +128,6 @@ def adjacency(n, pairs):
 
 
 @jit
-def pair_forces(y, products, pairs, status, pull_off, eps, out):
-    """Write each pair's force on its first piece (N, cone axes) into out (m, 3)."""
-    for q in range(pairs.shape[0]):
-        i = pairs[q, 0]
-        j = pairs[q, 1]
-        if status[i] != ACTIVE or status[j] != ACTIVE:
-            out[q, 0] = out[q, 1] = out[q, 2] = 0.0
-            continue
-        f0, f1, f2 = pair_force(y[i, 0:3], y[i, 3:6], products[i], y[j, 0:3], y[j, 3:6],
-                                products[j], pull_off, eps)
-        out[q, 0] = f0
-        out[q, 1] = f1
-        out[q, 2] = f2
-
-
-@jit
-def pair_jacobians(y, products, pairs, status, pull_off, eps, out):
-    """
-    Write d(F)/d(x_i, w_i) of every pair q = (i, j) into out (m, 3, 6), central differences.
-
-    d(F)/d(x_j, w_j) = -out[q] (:func:`contact.pair_jacobian`); inactive pairs get zeros.
-    """
-    sx = np.empty(3)
-    sw = np.empty(3)
-    for q in range(pairs.shape[0]):
-        i = pairs[q, 0]
-        j = pairs[q, 1]
-        if status[i] != ACTIVE or status[j] != ACTIVE:
-            for a in range(3):
-                for c in range(6):
-                    out[q, a, c] = 0.0
-            continue
-        pair_jacobian(y[i, 0:3], y[i, 3:6], products[i], y[j, 0:3], y[j, 3:6], products[j],
-                      pull_off, eps, out[q], sx, sw)
-
-
-@jit
-def assemble(y, products, machine, omega, domega, alpha, status, start, pair, sign, forces,
-             jac, own, f, s_lu, s_piv, t_mat, d_mat, d_lu, d_piv, u, rv):
-    """
-    Build the velocity system of the prediction, piece by piece (see :func:`predict`).
-
-    own (n, 9, 9) every piece's Jacobian with its pairs' diagonal blocks; f (n, 9) the
-    coupled field; s_lu, s_piv, t_mat the filter elimination (as :func:`islands.island_factor`);
-    d_mat (n, 3, 3) the diagonal blocks of the velocity system, d_lu and d_piv their
-    factors (the preconditioner);
-    u (n, 3) and rv (n, 3) the eliminated filter part and the right-hand side, the latter
-    without its pair terms (added by :func:`pair_rhs`). Inactive pieces get an identity row
-    and a zero right-hand side.
-    """
-    n = y.shape[0]
-    for p in range(n):
-        if status[p] != ACTIVE:
-            for a in range(3):
-                for b in range(3):
-                    d_mat[p, a, b] = d_lu[p, a, b] = 1.0 if a == b else 0.0
-                    t_mat[p, a, b] = 0.0
-                d_piv[p, a] = a
-                u[p, a] = 0.0
-                rv[p, a] = 0.0
-            for a in range(STATE_SIZE):
-                f[p, a] = 0.0
-            continue
-        blk = own[p]
-        jacobian(y[p], products[p], machine, omega, domega, blk)
-        rhs(y[p], products[p], machine, omega, domega, f[p])
-        mp = products[p, P_M]
-        for e in range(start[p], start[p + 1]):
-            q = pair[e]
-            for a in range(3):
-                f[p, 3 + a] += sign[e] * forces[q, a] / mp
-                for c in range(6):
-                    blk[3 + a, c] += jac[q, a, c] / mp
-        eliminate_filter(blk, alpha, s_lu[p], s_piv[p], t_mat[p], d_mat[p])
-        d_lu[p] = d_mat[p]
-        factor3(d_lu[p], d_piv[p])
-        r0 = f[p, 6] + (blk[6, 0] * f[p, 0] + blk[6, 1] * f[p, 1] + blk[6, 2] * f[p, 2]) / alpha
-        r1 = f[p, 7] + (blk[7, 0] * f[p, 0] + blk[7, 1] * f[p, 1] + blk[7, 2] * f[p, 2]) / alpha
-        r2 = f[p, 8] + (blk[8, 0] * f[p, 0] + blk[8, 1] * f[p, 1] + blk[8, 2] * f[p, 2]) / alpha
-        u0, u1, u2 = solve3(s_lu[p], s_piv[p], r0, r1, r2)
-        u[p, 0] = u0
-        u[p, 1] = u1
-        u[p, 2] = u2
-        for a in range(3):
-            acc = f[p, 3 + a]
-            for c in range(3):
-                acc += blk[3 + a, 6 + c] * u[p, c] + blk[3 + a, c] * f[p, c] / alpha
-            rv[p, a] = acc
-
-
-@jit
-def neighbour_sum(p, start, pair, other, blocks, v):
-    """Return sum over piece p's pairs q (partner o) of blocks[q] (3, 3) @ v[o] (3,)."""
-    s0 = s1 = s2 = 0.0
-    for e in range(start[p], start[p + 1]):
-        q = pair[e]
-        o = other[e]
-        s0 += blocks[q, 0, 0] * v[o, 0] + blocks[q, 0, 1] * v[o, 1] + blocks[q, 0, 2] * v[o, 2]
-        s1 += blocks[q, 1, 0] * v[o, 0] + blocks[q, 1, 1] * v[o, 1] + blocks[q, 1, 2] * v[o, 2]
-        s2 += blocks[q, 2, 0] * v[o, 0] + blocks[q, 2, 1] * v[o, 1] + blocks[q, 2, 2] * v[o, 2]
-    return s0, s1, s2
-
-
-@jit
-def pair_rhs(products, alpha, status, start, pair, other, jac, f, rv):
-    """Add the pair terms -G_x f_x(other) / (alpha m_p) to the right-hand side rv (n, 3)."""
-    for p in range(rv.shape[0]):
-        if status[p] != ACTIVE:
-            continue
-        s0, s1, s2 = neighbour_sum(p, start, pair, other, jac[:, :, 0:3], f[:, 0:3])
-        scale = 1.0 / (alpha * products[p, P_M])
-        rv[p, 0] -= s0 * scale
-        rv[p, 1] -= s1 * scale
-        rv[p, 2] -= s2 * scale
-
-
-@jit
-def off_blocks(jac, alpha, out):
-    """Write G_x / alpha + G_w of every pair, the velocity system's pair block, into out."""
-    for q in range(jac.shape[0]):
-        for a in range(3):
-            for b in range(3):
-                out[q, a, b] = jac[q, a, b] / alpha + jac[q, a, 3 + b]
-
-
-@jit
-def matvec(products, status, start, pair, other, d_mat, off, v, out):
-    """Write M v into out: M the velocity system, blocks d_mat and off / m_p."""
-    for p in range(v.shape[0]):
-        for a in range(3):
-            out[p, a] = (d_mat[p, a, 0] * v[p, 0] + d_mat[p, a, 1] * v[p, 1]
-                         + d_mat[p, a, 2] * v[p, 2])
-        if status[p] != ACTIVE:
-            continue
-        s0, s1, s2 = neighbour_sum(p, start, pair, other, off, v)
-        mp = products[p, P_M]
-        out[p, 0] += s0 / mp
-        out[p, 1] += s1 / mp
-        out[p, 2] += s2 / mp
-
-
-@jit
-def precondition(d_lu, d_piv, v, out):
-    """Write D^-1 v into out, D the factored diagonal blocks."""
-    for p in range(v.shape[0]):
-        o0, o1, o2 = solve3(d_lu[p], d_piv[p], v[p, 0], v[p, 1], v[p, 2])
-        out[p, 0] = o0
-        out[p, 1] = o1
-        out[p, 2] = o2
-
-
-@jit
-def dot(a, b):
-    """Return the sum of a * b over (n, 3) arrays, in a fixed order (thread-independent)."""
-    acc = 0.0
-    for p in range(a.shape[0]):
-        acc += a[p, 0] * b[p, 0] + a[p, 1] * b[p, 1] + a[p, 2] * b[p, 2]
-    return acc
-
-
-@jit
-def bicgstab(products, status, start, pair, other, d_mat, d_lu, d_piv, off, b, x, scratch):
-    """
-    Solve M x = b (n, 3) by BiCGSTAB with the block-Jacobi preconditioner; return iterations.
-
-    x receives the solution; a negative return is the iteration count of a solve that did
-    not reach SOLVE_RTOL (or broke down). scratch (7, n, 3).
-    """
-    r = scratch[0]
-    r_hat = scratch[1]
-    p_vec = scratch[2]
-    v = scratch[3]
-    p_hat = scratch[4]
-    s_hat = scratch[5]
-    t = scratch[6]
-    precondition(d_lu, d_piv, b, x)
-    matvec(products, status, start, pair, other, d_mat, off, x, t)
-    n = b.shape[0]
-    for p in range(n):
-        for a in range(3):
-            r[p, a] = b[p, a] - t[p, a]
-            r_hat[p, a] = r[p, a]
-            p_vec[p, a] = 0.0
-            v[p, a] = 0.0
-    b_norm = math.sqrt(dot(b, b))
-    if b_norm == 0.0:
-        return 0
-    goal = SOLVE_RTOL * b_norm
-    if math.sqrt(dot(r, r)) <= goal:
-        return 0
-    rho = 1.0
-    alpha = 1.0
-    omega = 1.0
-    for it in range(1, SOLVE_MAX_ITERATIONS + 1):
-        rho_new = dot(r_hat, r)
-        if rho_new == 0.0 or omega == 0.0:
-            return -it
-        beta = (rho_new / rho) * (alpha / omega)
-        for p in range(n):
-            for a in range(3):
-                p_vec[p, a] = r[p, a] + beta * (p_vec[p, a] - omega * v[p, a])
-        precondition(d_lu, d_piv, p_vec, p_hat)
-        matvec(products, status, start, pair, other, d_mat, off, p_hat, v)
-        denom = dot(r_hat, v)
-        if denom == 0.0:
-            return -it
-        alpha = rho_new / denom
-        for p in range(n):
-            for a in range(3):
-                r[p, a] -= alpha * v[p, a]   # r is now s
-                x[p, a] += alpha * p_hat[p, a]
-        if math.sqrt(dot(r, r)) <= goal:
-            return it
-        precondition(d_lu, d_piv, r, s_hat)
-        matvec(products, status, start, pair, other, d_mat, off, s_hat, t)
-        tt = dot(t, t)
-        if tt == 0.0:
-            return -it
-        omega = dot(t, r) / tt
-        for p in range(n):
-            for a in range(3):
-                x[p, a] += omega * s_hat[p, a]
-                r[p, a] -= omega * t[p, a]
-        if not math.isfinite(omega):
-            return -it
-        if math.sqrt(dot(r, r)) <= goal:
-            return it
-        rho = rho_new
-    return -SOLVE_MAX_ITERATIONS
-
-
-@jit
 def segment_index(seg_t, t):
     """Return s with seg_t[s] <= t < seg_t[s + 1] (the last segment for t at the end)."""
     n_seg = seg_t.shape[0] - 1
@@ -390,46 +159,201 @@ def sub_segments(seg_t, seg_omega, seg_domega, ta, tb, out_t, out_omega, out_dom
 
 
 @jit
-def advance_group(g, groups, y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t,
-                  flat_omega, flat_domega, r_exit, h_prop, status, t_event, rtol, atol, h_min,
-                  h_max, h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load, kink):
-    """
-    Advance the ACTIVE pieces g, g + groups, ... over one interval: the ramp, then the plateau.
+def pair_forces(y, products, pairs, hist, status, inter, out):
+    """Write each pair's force on its first piece (m, 3) (N); zero where a piece is gone."""
+    for q in range(pairs.shape[0]):
+        i = pairs[q, 0]
+        j = pairs[q, 1]
+        if status[i] != ACTIVE or status[j] != ACTIVE:
+            out[q, 0] = out[q, 1] = out[q, 2] = 0.0
+            continue
+        f = contact_force(y[i, 0] - y[j, 0], y[i, 1] - y[j, 1], y[i, 2] - y[j, 2],
+                          y[i, 3] - y[j, 3], y[i, 4] - y[j, 4], y[i, 5] - y[j, 5],
+                          hist[q, 0], hist[q, 1], hist[q, 2], products[i], products[j], inter)
+        out[q, 0] = f[0]
+        out[q, 1] = f[1]
+        out[q, 2] = f[2]
 
-    ramp_* and flat_* are the sub-segments of the two parts; ramp_load (n, 3) (m/s^2) the
-    load at the interval's start and ramp_rate (n, 3) (m/s^3) its rate over the ramp;
-    flat_load (n, 3) the plateau. A piece that exits or fails in the ramp stops there.
+
+@jit
+def predict(y, accel, products, pairs, hist, status, inter, h, out):
     """
+    Write each pair's force at t + h, the law at the pair's extrapolated state (m, 3).
+
+    Positions go by their velocities and accel (n, 3) (m/s^2), velocities by accel, the
+    history by the extrapolated relative displacement (turned and capped at the end).
+    """
+    half = 0.5 * h * h
+    for q in range(pairs.shape[0]):
+        i = pairs[q, 0]
+        j = pairs[q, 1]
+        if status[i] != ACTIVE or status[j] != ACTIVE:
+            out[q, 0] = out[q, 1] = out[q, 2] = 0.0
+            continue
+        a0 = accel[i, 0] - accel[j, 0]
+        a1 = accel[i, 1] - accel[j, 1]
+        a2 = accel[i, 2] - accel[j, 2]
+        u0 = y[i, 3] - y[j, 3]
+        u1 = y[i, 4] - y[j, 4]
+        u2 = y[i, 5] - y[j, 5]
+        e0 = u0 * h + a0 * half
+        e1 = u1 * h + a1 * half
+        e2 = u2 * h + a2 * half
+        d0 = y[i, 0] - y[j, 0] + e0
+        d1 = y[i, 1] - y[j, 1] + e1
+        d2 = y[i, 2] - y[j, 2] + e2
+        u0 += a0 * h
+        u1 += a1 * h
+        u2 += a2 * h
+        g0, g1, g2 = history_update(hist[q, 0], hist[q, 1], hist[q, 2], e0, e1, e2, d0, d1,
+                                    d2, u0, u1, u2, products[i], products[j], inter)
+        f = contact_force(d0, d1, d2, u0, u1, u2, g0, g1, g2, products[i], products[j],
+                          inter)
+        out[q, 0] = f[0]
+        out[q, 1] = f[1]
+        out[q, 2] = f[2]
+
+
+@jit
+def correct(y0, y1, products, pairs, hist, status, inter, hist_out, out):
+    """
+    Write each pair's history and force at the interval's end from the states reached.
+
+    y0, y1 (n, 9) the states at the start and the end; the relative displacement is the
+    change of x_i - x_j. Pairs with a piece gone, or apart at the end, lose their history.
+    """
+    for q in range(pairs.shape[0]):
+        i = pairs[q, 0]
+        j = pairs[q, 1]
+        if status[i] != ACTIVE or status[j] != ACTIVE:
+            for a in range(3):
+                hist_out[q, a] = 0.0
+                out[q, a] = 0.0
+            continue
+        d0 = y1[i, 0] - y1[j, 0]
+        d1 = y1[i, 1] - y1[j, 1]
+        d2 = y1[i, 2] - y1[j, 2]
+        u0 = y1[i, 3] - y1[j, 3]
+        u1 = y1[i, 4] - y1[j, 4]
+        u2 = y1[i, 5] - y1[j, 5]
+        g0, g1, g2 = history_update(
+            hist[q, 0], hist[q, 1], hist[q, 2], d0 - (y0[i, 0] - y0[j, 0]),
+            d1 - (y0[i, 1] - y0[j, 1]), d2 - (y0[i, 2] - y0[j, 2]), d0, d1, d2, u0, u1, u2,
+            products[i], products[j], inter)
+        hist_out[q, 0] = g0
+        hist_out[q, 1] = g1
+        hist_out[q, 2] = g2
+        f = contact_force(d0, d1, d2, u0, u1, u2, g0, g1, g2, products[i], products[j],
+                          inter)
+        out[q, 0] = f[0]
+        out[q, 1] = f[1]
+        out[q, 2] = f[2]
+
+
+@jit
+def interval_cap(y, products, pairs, status, inter, h):
+    """Return h cut to the contact time of the touching pairs and the touch of the others."""
+    cap = h
+    for q in range(pairs.shape[0]):
+        i = pairs[q, 0]
+        j = pairs[q, 1]
+        if status[i] != ACTIVE or status[j] != ACTIVE:
+            continue
+        f = contact_force(y[i, 0] - y[j, 0], y[i, 1] - y[j, 1], y[i, 2] - y[j, 2],
+                          y[i, 3] - y[j, 3], y[i, 4] - y[j, 4], y[i, 5] - y[j, 5], 0.0, 0.0,
+                          0.0, products[i], products[j], inter)
+        delta = f[3]
+        if delta > 0.0:
+            r_star, m_star, y_star, _ = pair_constants(products[i], products[j])
+            s_n = 2.0 * y_star * math.sqrt(r_star * delta)
+            cap = min(cap, OMEGA_CAP * math.sqrt(m_star / s_n))
+        else:
+            d0 = y[i, 0] - y[j, 0]
+            d1 = y[i, 1] - y[j, 1]
+            d2 = y[i, 2] - y[j, 2]
+            dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if dist == 0.0:
+                continue
+            closing = -((y[i, 3] - y[j, 3]) * d0 + (y[i, 4] - y[j, 4]) * d1
+                        + (y[i, 5] - y[j, 5]) * d2) / dist
+            if closing > 0.0 and -delta < closing * cap:
+                cap = max(-delta / closing, TOUCH_FRACTION * cap)
+    return cap
+
+
+@jit
+def piece_loads(products, start, pair, sign, begin, end, h, load, rate):
+    """Sum each piece's pair loads (m/s^2): their value at the start, and their rate."""
+    for p in range(load.shape[0]):
+        mp = products[p, P_M]
+        for a in range(3):
+            b0 = 0.0
+            b1 = 0.0
+            for e in range(start[p], start[p + 1]):
+                b0 += sign[e] * begin[pair[e], a]
+                b1 += sign[e] * end[pair[e], a]
+            load[p, a] = b0 / mp
+            rate[p, a] = (b1 - b0) / (mp * h)
+
+
+@jit
+def impulse_error(products, status, start, pair, other, sign, begin, end, f_start, f_end, h):
+    """
+    Return the largest position error (m) of the interval over the ACTIVE pieces.
+
+    A piece's velocity error is h/m sum ((L0 + L1) - (F(y0) + F(y1))) / 2 over its pairs
+    whose other piece is still there; its position error is h times that.
+    """
+    worst = 0.0
+    for p in range(status.shape[0]):
+        if status[p] != ACTIVE:
+            continue
+        e0 = 0.0
+        e1 = 0.0
+        e2 = 0.0
+        for e in range(start[p], start[p + 1]):
+            if status[other[e]] != ACTIVE:
+                continue
+            q = pair[e]
+            s = sign[e]
+            e0 += s * (begin[q, 0] + end[q, 0] - f_start[q, 0] - f_end[q, 0])
+            e1 += s * (begin[q, 1] + end[q, 1] - f_start[q, 1] - f_end[q, 1])
+            e2 += s * (begin[q, 2] + end[q, 2] - f_start[q, 2] - f_end[q, 2])
+        size = 0.5 * h * h / products[p, P_M] * math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        if not math.isfinite(size):
+            return np.inf
+        worst = max(worst, size)
+    return worst
+
+
+@jit
+def advance_group(g, groups, y, products, machine, sub_t, sub_omega, sub_domega, r_exit, h_prop,
+                  status, t_event, rtol, atol, h_min, h_max, h_kink, max_steps, stats, load,
+                  rate, kink):
+    """Advance the ACTIVE pieces g, g + groups, ... over one interval with their loads."""
     n = STATE_SIZE
-    count = y.shape[0]
-    none = np.zeros(3)
     work = np.empty((2, n, n))
     piv = np.empty((2, 3), dtype=np.int64)
     k = np.empty((n, n))
     y1 = np.empty(n)
     f0 = np.empty(n)
-    for p in range(g, count, groups):
+    for p in range(g, y.shape[0], groups):
         if status[p] != ACTIVE:
             continue
         hp = min(h_prop[p], h_kink) if kink else h_prop[p]
-        st, t_ev, hp = advance_particle(y[p], products[p], machine, ramp_t, ramp_omega,
-                                        ramp_domega, r_exit, hp, rtol, atol, h_min, h_max,
+        st, t_ev, hp = advance_particle(y[p], products[p], machine, sub_t, sub_omega,
+                                        sub_domega, r_exit, hp, rtol, atol, h_min, h_max,
                                         h_kink, max_steps, stats[p], work, piv, k, y1, f0,
-                                        ramp_load[p], ramp_rate[p])
-        if st == ACTIVE:
-            st, t_ev, hp = advance_particle(y[p], products[p], machine, flat_t, flat_omega,
-                                            flat_domega, r_exit, hp, rtol, atol, h_min, h_max,
-                                            h_kink, max_steps, stats[p], work, piv, k, y1, f0,
-                                            flat_load[p], none)
+                                        load[p], rate[p])
         status[p] = st
         t_event[p] = t_ev
         h_prop[p] = hp
 
 
 @pjit
-def advance_pieces(y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t, flat_omega,
-                   flat_domega, r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max,
-                   h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load, kink):
+def advance_pieces(y, products, machine, sub_t, sub_omega, sub_domega, r_exit, h_prop, status,
+                   t_event, rtol, atol, h_min, h_max, h_kink, max_steps, stats, load, rate,
+                   kink):
     """
     Advance every ACTIVE piece over one interval on numba's threads (:func:`advance_group`).
 
@@ -438,149 +362,38 @@ def advance_pieces(y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t
     """
     groups = min(y.shape[0], GROUPS)
     for g in numba.prange(groups):
-        advance_group(g, groups, y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t,
-                      flat_omega, flat_domega, r_exit, h_prop, status, t_event, rtol, atol,
-                      h_min, h_max, h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load,
-                      kink)
+        advance_group(g, groups, y, products, machine, sub_t, sub_omega, sub_domega, r_exit,
+                      h_prop, status, t_event, rtol, atol, h_min, h_max, h_kink, max_steps,
+                      stats, load, rate, kink)
 
 
 @jit
-def shapes(used, begin, ramp, plateau):
-    """
-    Write each pair's plateau: the load that ramps from begin over ramp of the interval.
-
-    The pair's impulse over the interval is that of ``used`` (m, 3) held over all of it:
-    ramp (fraction of the interval) from begin (m, 3) to the plateau, then the plateau,
-    so plateau = (used - ramp begin / 2) / (1 - ramp / 2).
-    """
-    for q in range(used.shape[0]):
-        for a in range(3):
-            plateau[q, a] = (used[q, a] - 0.5 * ramp * begin[q, a]) / (1.0 - 0.5 * ramp)
-
-
-@jit
-def piece_loads(products, start, pair, sign, begin, plateau, ramp_time, ramp_load, ramp_rate,
-                flat_load):
-    """Sum each piece's pair loads (m/s^2): at the start, their rate in the ramp, plateau."""
-    for p in range(ramp_load.shape[0]):
-        mp = products[p, P_M]
-        for a in range(3):
-            b0 = 0.0
-            b1 = 0.0
-            for e in range(start[p], start[p + 1]):
-                b0 += sign[e] * begin[pair[e], a]
-                b1 += sign[e] * plateau[pair[e], a]
-            ramp_load[p, a] = b0 / mp
-            flat_load[p, a] = b1 / mp
-            ramp_rate[p, a] = (b1 - b0) / (mp * ramp_time)
-
-
-@jit
-def loads_from(y_pred_delta, status, pairs, forces, jac, used):
-    """
-    Write each pair's force at the predicted end into used (m, 3).
-
-    used_q = F_q + G_q (k_i - k_j) over positions and velocities (k the prediction, (n, 9)).
-    """
-    for q in range(pairs.shape[0]):
-        i = pairs[q, 0]
-        j = pairs[q, 1]
-        for a in range(3):
-            acc = forces[q, a]
-            if status[i] == ACTIVE and status[j] == ACTIVE:
-                for c in range(6):
-                    acc += jac[q, a, c] * (y_pred_delta[i, c] - y_pred_delta[j, c])
-            used[q, a] = acc
-
-
-@jit
-def raw_error(products, status, start, pair, other, sign, used, f_start, f_end, h, alpha, out):
-    """
-    Write alpha times each piece's raw impulse error (m/s), alpha H/m sum (F_used - F_avg).
-
-    F_avg = (F(y0) + F(y1)) / 2 over the piece's pairs, out (n, 3). A pair whose other piece
-    left the cone (or failed) inside the interval is not counted: its force ended with it.
-    Pieces no longer ACTIVE get zeros.
-    """
-    for p in range(status.shape[0]):
-        out[p, 0] = out[p, 1] = out[p, 2] = 0.0
-        if status[p] != ACTIVE:
-            continue
-        scale = alpha * h / products[p, P_M]
-        for e in range(start[p], start[p + 1]):
-            if status[other[e]] != ACTIVE:
-                continue
-            q = pair[e]
-            s = sign[e] * scale
-            for a in range(3):
-                out[p, a] += s * (used[q, a] - 0.5 * (f_start[q, a] + f_end[q, a]))
-
-
-@jit
-def largest_norm(v):
-    """Return the largest Euclidean norm of the rows of v (n, 3); inf if any is not finite."""
-    worst = 0.0
-    for p in range(v.shape[0]):
-        norm = math.sqrt(v[p, 0] * v[p, 0] + v[p, 1] * v[p, 1] + v[p, 2] * v[p, 2])
-        if not math.isfinite(norm):
-            return np.inf
-        worst = max(worst, norm)
-    return worst
-
-
-@jit
-def advance_serially(y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t, flat_omega,
-                     flat_domega, r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max,
-                     h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load, kink):
-    """Advance every ACTIVE piece over one interval on this thread (a small crowd)."""
-    advance_group(0, 1, y, products, machine, ramp_t, ramp_omega, ramp_domega, flat_t,
-                  flat_omega, flat_domega, r_exit, h_prop, status, t_event, rtol, atol, h_min,
-                  h_max, h_kink, max_steps, stats, ramp_load, ramp_rate, flat_load, kink)
-
-
-@jit
-def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r_exit, h_prop,
-                    status, t_event, rtol, atol, h_min, h_max, h_kink, max_steps, stats,
-                    pull_off, h_coupling, tolerance, counters):
+def advance_coupled(y, products, pairs, hist, inter, machine, seg_t, seg_omega, seg_domega,
+                    r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max, h_kink,
+                    max_steps, stats, h_coupling, tolerance, counters):
     """
     Advance pieces that touch over seg_t[0]..seg_t[-1] by multirate coupling; return H.
 
-    y (n, 9) cone-axes states, products (n, W), pairs (m, 2) int64 local indices i < j;
-    h_prop (n,), status (n,), t_event (n,), stats (n, STAT_WIDTH) as in
-    :func:`integrator.advance_batch`, updated in place; h_coupling (s) the proposed first
-    coupling interval; tolerance (m) the largest position error one interval may give a
-    piece (the filtered estimate's position part);
-    counters (COUPLING_STAT_WIDTH,) int64. Pieces that exit or fail inside an interval
-    leave the coupling at their time, their pairs with them. Returns the proposed next
-    coupling interval (s).
+    y (n, 9) cone-axes states, products (n, W), pairs (m, 2) int64 local indices i < j,
+    hist (m, 3) their histories (m, cone axes), inter the law's row; h_prop (n,), status
+    (n,), t_event (n,), stats (n, STAT_WIDTH) as in :func:`integrator.advance_batch`; all
+    updated in place. h_coupling (s) the proposed first coupling interval; tolerance (m)
+    the largest position error one interval may give a piece; counters
+    (COUPLING_STAT_WIDTH,) int64. Pieces that exit or fail inside an interval leave the
+    coupling at their time, their pairs (and histories) with them. Returns the proposed
+    next coupling interval (s).
     """
     n = y.shape[0]
     m = pairs.shape[0]
     start, pair, other, sign = adjacency(n, pairs)
-    eps = machine[G_EPS]
-    forces = np.empty((m, 3))
+    f_start = np.empty((m, 3))
     f_end = np.empty((m, 3))
-    used = np.empty((m, 3))
-    jac = np.empty((m, 3, 6))
-    off = np.empty((m, 3, 3))
-    own = np.empty((n, STATE_SIZE, STATE_SIZE))
-    field = np.empty((n, STATE_SIZE))
-    s_lu = np.empty((n, 3, 3))
-    s_piv = np.empty((n, 3), dtype=np.int64)
-    t_mat = np.empty((n, 3, 3))
-    d_mat = np.empty((n, 3, 3))
-    d_lu = np.empty((n, 3, 3))
-    d_piv = np.empty((n, 3), dtype=np.int64)
-    u = np.empty((n, 3))
-    rv = np.empty((n, 3))
-    kw = np.empty((n, 3))
-    delta = np.empty((n, STATE_SIZE))
     begin = np.empty((m, 3))
-    plateau = np.empty((m, 3))
-    ramp_load = np.empty((n, 3))
-    ramp_rate = np.empty((n, 3))
-    flat_load = np.empty((n, 3))
-    scratch = np.empty((7, n, 3))
+    end = np.empty((m, 3))
+    hist_end = np.empty((m, 3))
+    load = np.empty((n, 3))
+    rate = np.empty((n, 3))
+    accel = np.zeros((n, 3))
     y_save = np.empty_like(y)
     h_save = np.empty_like(h_prop)
     status_save = np.empty_like(status)
@@ -590,81 +403,40 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
     sub_t = np.empty(n_seg + 1)
     sub_omega = np.empty(n_seg)
     sub_domega = np.empty(n_seg)
-    sub2_t = np.empty(n_seg + 1)
-    sub2_omega = np.empty(n_seg)
-    sub2_domega = np.empty(n_seg)
     t = seg_t[0]
     t1 = seg_t[n_seg]
     h = h_coupling
-    pair_forces(y, products, pairs, status, pull_off, eps, forces)
-    begin[:] = forces  # the loads start from the pair forces, and stay continuous
+    pair_forces(y, products, pairs, hist, status, inter, f_start)
+    begin[:] = f_start  # the loads start from the pair forces, and stay continuous
     rejected = False
     while t < t1:
         remaining = t1 - t
-        truncated = h >= remaining
-        hc = remaining if truncated else h
+        hc = interval_cap(y, products, pairs, status, inter, min(h, remaining))
+        hc = max(hc, min(H_FLOOR, remaining))
+        truncated = hc >= remaining
+        t_end = t1 if truncated else t + hc
         s = segment_index(seg_t, t)
-        omega = seg_omega[s] + seg_domega[s] * (t - seg_t[s])
         kink = s > 0 and t == seg_t[s] and seg_domega[s] != seg_domega[s - 1]
-        alpha = 1.0 / hc
-        # 1. the prediction: one linearly implicit Euler step of the coupled system
-        pair_jacobians(y, products, pairs, status, pull_off, eps, jac)
-        assemble(y, products, machine, omega, seg_domega[s], alpha, status, start, pair, sign,
-                 forces, jac, own, field, s_lu, s_piv, t_mat, d_mat, d_lu, d_piv, u, rv)
-        pair_rhs(products, alpha, status, start, pair, other, jac, field, rv)
-        off_blocks(jac, alpha, off)
-        its = bicgstab(products, status, start, pair, other, d_mat, d_lu, d_piv, off, rv, kw,
-                       scratch)
-        counters[CST_ITERATIONS] += abs(its)
-        if its < 0:
-            counters[CST_REJECTED] += 1
-            h = hc * FAC_MIN
-            rejected = True
-            if h < H_FLOOR:
-                h = H_FLOOR
-            continue
-        for p in range(n):
-            for a in range(3):
-                delta[p, a] = (field[p, a] + kw[p, a]) / alpha
-                delta[p, 3 + a] = kw[p, a]
-        # 2. the pair forces at the predicted end, each piece's load
-        loads_from(delta, status, pairs, forces, jac, used)
-        ramp_time = RAMP * hc
-        shapes(used, begin, RAMP, plateau)
-        piece_loads(products, start, pair, sign, begin, plateau, ramp_time, ramp_load,
-                    ramp_rate, flat_load)
-        # 3. every piece alone, with its load
+        predict(y, accel, products, pairs, hist, status, inter, hc, end)
+        piece_loads(products, start, pair, sign, begin, end, hc, load, rate)
         y_save[:] = y
         h_save[:] = h_prop
         status_save[:] = status
         event_save[:] = t_event
         for p in range(n):
             reason_save[p] = stats[p, STAT_REASON]
-        t_mid = t + ramp_time
-        t_end = t1 if truncated else t + hc
-        c0 = sub_segments(seg_t, seg_omega, seg_domega, t, t_mid, sub_t, sub_omega, sub_domega)
-        c1 = sub_segments(seg_t, seg_omega, seg_domega, t_mid, t_end, sub2_t, sub2_omega,
-                          sub2_domega)
+        c = sub_segments(seg_t, seg_omega, seg_domega, t, t_end, sub_t, sub_omega, sub_domega)
         if n >= PARALLEL_PIECES:
-            advance_pieces(y, products, machine, sub_t[:c0 + 1], sub_omega[:c0],
-                           sub_domega[:c0], sub2_t[:c1 + 1], sub2_omega[:c1],
-                           sub2_domega[:c1], r_exit, h_prop, status, t_event, rtol, atol,
-                           h_min, h_max, h_kink, max_steps, stats, ramp_load, ramp_rate,
-                           flat_load, kink)
+            advance_pieces(y, products, machine, sub_t[:c + 1], sub_omega[:c],
+                           sub_domega[:c], r_exit, h_prop, status, t_event, rtol, atol, h_min,
+                           h_max, h_kink, max_steps, stats, load, rate, kink)
         else:
-            advance_serially(y, products, machine, sub_t[:c0 + 1], sub_omega[:c0],
-                             sub_domega[:c0], sub2_t[:c1 + 1], sub2_omega[:c1],
-                             sub2_domega[:c1], r_exit, h_prop, status, t_event, rtol, atol,
-                             h_min, h_max, h_kink, max_steps, stats, ramp_load, ramp_rate,
-                             flat_load, kink)
-        # 4. the error of the interval's impulses
-        pair_forces(y, products, pairs, status, pull_off, eps, f_end)
-        raw_error(products, status, start, pair, other, sign, used, forces, f_end, hc, alpha,
-                  rv)
-        its = bicgstab(products, status, start, pair, other, d_mat, d_lu, d_piv, off, rv,
-                       kw, scratch)
-        counters[CST_ITERATIONS] += abs(its)
-        err = hc * largest_norm(kw) if its >= 0 else np.inf  # its position part (m)
+            advance_group(0, 1, y, products, machine, sub_t[:c + 1], sub_omega[:c],
+                          sub_domega[:c], r_exit, h_prop, status, t_event, rtol, atol, h_min,
+                          h_max, h_kink, max_steps, stats, load, rate, kink)
+        correct(y_save, y, products, pairs, hist, status, inter, hist_end, f_end)
+        err = impulse_error(products, status, start, pair, other, sign, begin, end, f_start,
+                            f_end, hc)
         ratio = err / tolerance
         if not (ratio <= 1.0) and hc > H_FLOOR:
             counters[CST_REJECTED] += 1
@@ -674,22 +446,27 @@ def advance_coupled(y, products, pairs, machine, seg_t, seg_omega, seg_domega, r
             t_event[:] = event_save
             for p in range(n):
                 stats[p, STAT_REASON] = reason_save[p]
-            fac = SAFETY / math.sqrt(ratio) if math.isfinite(ratio) else FAC_MIN
-            h = hc * min(FAC_MIN if rejected else 1.0, max(FAC_MIN, fac))
-            h = max(h, H_FLOOR)
+            fac = SAFETY * ratio ** (-1.0 / ORDER) if math.isfinite(ratio) else FAC_MIN
+            h = max(hc * min(FAC_MIN if rejected else 1.0, max(FAC_MIN, fac)), H_FLOOR)
             rejected = True
             continue
         if not (ratio <= 1.0):
             counters[CST_FORCED] += 1
         counters[CST_ACCEPTED] += 1
-        grow = FAC_MAX if ratio == 0.0 else min(FAC_MAX, max(FAC_MIN, SAFETY / math.sqrt(ratio)))
+        grow = FAC_MAX if ratio == 0.0 else min(FAC_MAX, max(FAC_MIN,
+                                                            SAFETY * ratio ** (-1.0 / ORDER)))
         if rejected:
             grow = min(grow, 1.0)
         h_next = min(h_max, hc * grow)
         h = max(h, h_next) if truncated else h_next
         h = min(h, h_max)
         rejected = False
+        inv = 1.0 / (t_end - t)
+        for p in range(n):
+            for a in range(3):
+                accel[p, a] = (y[p, 3 + a] - y_save[p, 3 + a]) * inv
         t = t_end
-        forces[:] = f_end
-        begin[:] = plateau
+        f_start[:] = f_end
+        begin[:] = end
+        hist[:] = hist_end
     return h

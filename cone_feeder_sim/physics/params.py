@@ -117,6 +117,8 @@ PRODUCT_LIMITS: dict[str, Limit] = {
     'r_a': Limit(0.0, 1.0, '', lo_open=True, hi_open=True),
     'r_d': Limit(0.0, 1.0e6, 's/m', lo_open=True),
     'r_f': Limit(0.0, 1.0e6, 'N', lo_open=True),
+    'young_modulus': Limit(0.0, 1.0e12, 'Pa', lo_open=True),
+    'poisson_ratio': Limit(0.0, 0.5, ''),
 }
 
 #: Ranges of the machine and model parameters shared by all pieces.
@@ -144,8 +146,9 @@ SOLVER_LIMITS: dict[str, Limit] = {
 
 #: Ranges of the piece-piece contact settings (InteractionParams).
 INTERACTION_LIMITS: dict[str, Limit] = {
+    'restitution': Limit(0.0, 1.0, '', lo_open=True),
+    'friction': Limit(0.0, 10.0, ''),
     'pull_off': Limit(0.0, 1.0e3, 'N'),
-    'max_island': Limit(2, 10 ** 6, 'pieces'),
     'coupling_tolerance': Limit(0.0, 1.0e-2, 'm', lo_open=True),
 }
 
@@ -183,6 +186,8 @@ class ProductParams:
     r_a: float = 0.99
     r_d: float = 120.0
     r_f: float = 120.0
+    young_modulus: float = 4.0e4
+    poisson_ratio: float = 0.45
 
     def __post_init__(self) -> None:
         """Validate every field against :data:`PRODUCT_LIMITS`."""
@@ -216,21 +221,26 @@ class ProductParams:
 
 # Column layout of one row of the per-particle product array used by the kernel.
 P_M, P_D, P_MU_C, P_MU_S, P_V_C, P_V_S, P_T_F, P_QDOT_F = range(8)
-P_S0, P_SC_RATIO, P_R_A, P_R_D, P_R_F, P_R_T, P_R_C, P_C_S = range(8, 16)
-PRODUCT_WIDTH = 16
+P_S0, P_SC_RATIO, P_R_A, P_R_D, P_R_F, P_E, P_NU = range(8, 15)
+P_R_T, P_R_C, P_C_S, P_Y_COMPLIANCE, P_G_COMPLIANCE = range(15, 20)
+PRODUCT_WIDTH = 20
 
 
 def product_row(product: ProductParams) -> np.ndarray:
     """
     Return the kernel's row for one product, shape (PRODUCT_WIDTH,), float64.
 
-    Columns 0..12 are the fields of :class:`ProductParams` in declaration order; then r_t
-    (1/m, eq. 32), r_c (m, eq. 33) and c_S = mu_S - mu_C*tanh(v_S/v_C), the coefficient of
-    the normal force in F_S^Delta (eq. 10).
+    Columns 0..14 are the fields of :class:`ProductParams` in declaration order; then r_t
+    (1/m, eq. 32), r_c (m, eq. 33), c_S = mu_S - mu_C*tanh(v_S/v_C), the coefficient of
+    the normal force in F_S^Delta (eq. 10), and the piece's share of a pair's normal and
+    shear compliance (1/Pa): (1 - nu^2)/E and 2 (2 - nu)(1 + nu)/E, which add up to a
+    pair's 1/Y* and 1/G* (doc/model.md, "Contact between pieces").
     """
     base = [float(getattr(product, f.name)) for f in fields(product)]
     c_s = product.mu_S - product.mu_C * math.tanh(product.v_S / product.v_C)
-    return np.array(base + [product.r_t, product.r_c, c_s], dtype=np.float64)
+    e, nu = product.young_modulus, product.poisson_ratio
+    return np.array(base + [product.r_t, product.r_c, c_s, (1.0 - nu * nu) / e,
+                            2.0 * (2.0 - nu) * (1.0 + nu) / e], dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -294,27 +304,28 @@ class ChannelLayout:
 @dataclass(frozen=True)
 class InteractionParams:
     """
-    Contact between pieces (doc/model.md, "Pieces that touch").
+    Contact between pieces: the soft-sphere law of DEM (doc/model.md, "Contact between pieces").
 
     enabled: pieces push, rub and stick to each other (off: each piece moves alone, the
-    paper's model); pull_off (N): amplitude of the adhesion between two pieces, the force
-    that holds two just-touching pieces together. The default 0.05 N is an assumption (the
-    paper gives no value): raw meat sticks to meat weakly, about 4 % of the weight of a
-    default 0.125-kg piece. coupling: 'multirate' (default: each piece keeps its own steps,
-    the pair forces are coupled over intervals whose impulse error is held within
-    coupling_tolerance, :mod:`coupling`; no pair is ever left out) or 'exact' (contact
-    islands integrated as one system, :mod:`islands`: the reference). coupling_tolerance
-    (m/s): the largest error of the velocity a pair's impulse gives a piece over one
-    coupling interval. max_island (exact coupling only): the largest contact island
-    integrated as one system; a larger one is cut, in its band order, into parts of at most
-    this many pieces, and the pairs between parts are left out for that interval (counted
-    in ``StepStats.pairs_left_out``); raise it for exact coupling of any crowd.
+    paper's model). The pair law (its parameters apart from each product's young_modulus
+    and poisson_ratio): restitution e, the separation speed over the closing speed of a
+    collision (sets the normal and tangential damping); friction, the Coulomb coefficient
+    between two pieces; pull_off (N), the largest pull between two default pieces (sizes
+    the cohesion). The defaults e = 0.3, friction 0.5 and pull-off 0.05 N are assumptions:
+    no measurement of raw meat on raw meat is known to us (config/table2.yaml says so).
+    coupling: 'multirate' (default: each piece keeps its own steps, the pair forces couple
+    the pieces over intervals chosen by the contact time and error control,
+    :mod:`coupling`) or 'exact' (the pieces that touch and their contact histories
+    integrated as one system, :mod:`exact`: the reference, whatever the cost).
+    coupling_tolerance (m): the largest position error one coupling interval may give a
+    piece.
     """
 
     enabled: bool = False
+    restitution: float = 0.3
+    friction: float = 0.5
     pull_off: float = 0.05
-    max_island: int = 48
-    coupling: str = 'exact'
+    coupling: str = 'multirate'
     coupling_tolerance: float = 1.0e-6
 
     def __post_init__(self) -> None:
@@ -323,14 +334,16 @@ class InteractionParams:
             raise ParameterError(f"parameter 'interactions.enabled' must be true or false, "
                                  f'got {self.enabled!r}')
         object.__setattr__(self, 'enabled', bool(self.enabled))
-        object.__setattr__(self, 'pull_off', check_number(
-            'interactions.pull_off', self.pull_off, INTERACTION_LIMITS['pull_off']))
-        object.__setattr__(self, 'max_island', check_integer(
-            'interactions.max_island', self.max_island, INTERACTION_LIMITS['max_island']))
+        for key in ('restitution', 'friction', 'pull_off', 'coupling_tolerance'):
+            object.__setattr__(self, key, check_number(
+                f'interactions.{key}', getattr(self, key), INTERACTION_LIMITS[key]))
         check_choice('interactions.coupling', self.coupling, COUPLING_CHOICES)
-        object.__setattr__(self, 'coupling_tolerance', check_number(
-            'interactions.coupling_tolerance', self.coupling_tolerance,
-            INTERACTION_LIMITS['coupling_tolerance']))
+
+    @property
+    def beta(self) -> float:
+        """Return the damping ratio of the law, ln e / sqrt(ln^2 e + pi^2) (0 for e = 1)."""
+        log_e = math.log(self.restitution)
+        return log_e / math.sqrt(log_e * log_e + math.pi * math.pi)
 
 
 # Layout of the global (machine and model) array used by the kernel.
@@ -395,7 +408,8 @@ class ModelParams:
 
 
 #: Keys of the ``interactions`` mapping of parameter files and scenarios.
-INTERACTION_KEYS = ('enabled', 'pull_off', 'max_island', 'coupling', 'coupling_tolerance')
+INTERACTION_KEYS = ('enabled', 'restitution', 'friction', 'pull_off', 'coupling',
+                    'coupling_tolerance')
 
 
 def check_section(section: str, mapping: Any, keys: Sequence[str]) -> Mapping[str, Any]:

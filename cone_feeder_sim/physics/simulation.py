@@ -30,19 +30,18 @@ import math
 
 import numpy as np
 
-from .band import band_order
+from .contact import interaction_row
 from .coupling import (
     advance_coupled, COUPLING_STAT_WIDTH, CST_ACCEPTED, CST_FORCED, CST_REJECTED)
+from .exact import advance_island, islands_of
 from .integrator import (
     ACTIVE, advance_batch, advance_batch_owned, EXITED, FAILED, REASON_NOT_FINITE,
     REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED,
     STAT_WIDTH)
-from .islands import advance_island, islands_of
 from .model import STATE_SIZE
 from .neighbours import contact_pairs
 from .params import (
-    ModelParams, P_M, P_R_A, P_S0, P_SC_RATIO, product_row, PRODUCT_WIDTH, ProductParams,
-    SolverParams)
+    ModelParams, P_M, P_S0, product_row, PRODUCT_WIDTH, ProductParams, SolverParams)
 from .rotation import rotate_z, RotationProfile
 from ..errors import ScenarioError
 
@@ -61,6 +60,7 @@ class SimParams:
     solver: SolverParams = SolverParams()
     global_row: np.ndarray = field(init=False, repr=False)
     atol: np.ndarray = field(init=False, repr=False)
+    interaction_row: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         """Derive the kernel arrays."""
@@ -70,6 +70,7 @@ class SimParams:
         atol.setflags(write=False)
         object.__setattr__(self, 'global_row', machine)
         object.__setattr__(self, 'atol', atol)
+        object.__setattr__(self, 'interaction_row', interaction_row(self.model))
 
 
 @dataclass(frozen=True)
@@ -81,7 +82,9 @@ class SimState:
     products (N, PRODUCT_WIDTH) product rows; ids (N,) int64 unique particle ids;
     step_size (N,) proposed next step sizes (s); next_id the id the next new particle gets;
     coupling_step (s) the proposed next coupling interval of pieces that touch (multirate
-    coupling; 0: none yet, the solver's h_init).
+    coupling; 0: none yet, the solver's h_init); contact_ids (K, 2) int64 the pieces (ids,
+    first < second, sorted) of every contact with a history, contact_history (K, 3) (m, cone
+    axes) its tangential displacement (:mod:`.contact.tangential`).
     """
 
     t: float = 0.0
@@ -92,6 +95,8 @@ class SimState:
     step_size: np.ndarray = field(default_factory=lambda: np.zeros(0))
     next_id: int = 0
     coupling_step: float = 0.0
+    contact_ids: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+    contact_history: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def count(self) -> int:
@@ -146,20 +151,18 @@ class StepStats:
     Solver statistics of one interval: accepted and rejected steps over all particles.
 
     largest_island: pieces in the largest contact island of the interval (0 without
-    contact), before any cut. An island takes the steps its most demanding piece needs, so
-    this is what makes a crowded interval expensive. pairs_left_out: pairs within reach
-    that were left out because their island was larger than
-    ``InteractionParams.max_island`` and was cut into parts (exact coupling only).
-    coupling_intervals, coupling_rejected: the multirate coupling's accepted and rejected
-    intervals; coupling_forced: intervals accepted at the shortest interval although their
-    error estimate was above the tolerance (:mod:`coupling`).
+    contact): pieces linked by pairs within reach. contacts: pairs touching at the end of
+    the interval (each with its history). coupling_intervals, coupling_rejected: the
+    multirate coupling's accepted and rejected intervals; coupling_forced: intervals
+    accepted at the shortest interval although their error estimate was above the
+    tolerance (:mod:`coupling`).
     """
 
     accepted: int
     rejected: int
     particles: int
     largest_island: int = 0
-    pairs_left_out: int = 0
+    contacts: int = 0
     coupling_intervals: int = 0
     coupling_rejected: int = 0
     coupling_forced: int = 0
@@ -302,10 +305,14 @@ def add_particles(state: SimState, params: SimParams, positions: object,
 
 
 def remove_particles(state: SimState, ids: object) -> SimState:
-    """Return a new state without the particles whose ids are given."""
-    keep = ~np.isin(state.ids, np.asarray(ids, dtype=np.int64))
+    """Return a new state without the particles whose ids are given (and their contacts)."""
+    gone = np.asarray(ids, dtype=np.int64)
+    keep = ~np.isin(state.ids, gone)
+    kept = ~np.isin(state.contact_ids, gone).any(axis=1)
     return replace(state, y=state.y[keep], products=state.products[keep],
-                   ids=state.ids[keep], step_size=state.step_size[keep])
+                   ids=state.ids[keep], step_size=state.step_size[keep],
+                   contact_ids=state.contact_ids[kept],
+                   contact_history=state.contact_history[kept])
 
 
 def advance(state: SimState, params: SimParams, profile: RotationProfile,
@@ -322,14 +329,8 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
     solver = params.solver
     interactions = params.model.interactions
     n = state.count
-    if interactions.enabled and n > 1 and interactions.coupling == 'multirate':
-        work.largest_island, work.coupling_step = _advance_multirate(
-            state, params, profile, t1, work.y, work.step_size, work.status, work.t_event,
-            work.stats, work.counters)
-    elif interactions.enabled and n > 1:
-        work.largest_island, work.left_out = _advance_with_contacts(
-            state, params, profile, t1, work.y, work.step_size, work.status, work.t_event,
-            work.stats)
+    if interactions.enabled and n > 1:
+        _advance_with_contacts(state, params, profile, t1, work)
     elif n:
         advance_batch(work.y, state.products, params.global_row, seg_t, seg_omega, seg_domega,
                       params.model.r, work.step_size, work.status, work.t_event, solver.rtol,
@@ -397,8 +398,9 @@ class _Work:
         self.stats = np.zeros((n, STAT_WIDTH), dtype=np.int64)
         self.counters = np.zeros(COUPLING_STAT_WIDTH, dtype=np.int64)
         self.largest_island = 0
-        self.left_out = 0
         self.coupling_step = state.coupling_step
+        self.contact_ids = np.zeros((0, 2), dtype=np.int64)
+        self.contact_history = np.zeros((0, 3))
 
 
 def _result(state: SimState, params: SimParams, profile: RotationProfile, t1: float,
@@ -413,48 +415,76 @@ def _result(state: SimState, params: SimParams, profile: RotationProfile, t1: fl
     keep = status == ACTIVE
     new_state = replace(state, t=float(t1), angle=state.angle + profile.integral(state.t, t1),
                         y=y[keep], products=state.products[keep], ids=state.ids[keep],
-                        step_size=work.step_size[keep], coupling_step=work.coupling_step)
+                        step_size=work.step_size[keep], coupling_step=work.coupling_step,
+                        contact_ids=work.contact_ids, contact_history=work.contact_history)
     step_stats = StepStats(accepted=int(stats[:, STAT_ACCEPTED].sum()),
                            rejected=int(stats[:, STAT_REJECTED].sum()), particles=state.count,
-                           largest_island=work.largest_island, pairs_left_out=work.left_out,
+                           largest_island=work.largest_island,
+                           contacts=int(work.contact_ids.shape[0]),
                            coupling_intervals=int(counters[CST_ACCEPTED]),
                            coupling_rejected=int(counters[CST_REJECTED]),
                            coupling_forced=int(counters[CST_FORCED]))
     return StepResult(state=new_state, exits=exits, failures=failures, stats=step_stats)
 
 
-#: The pair force is below this fraction of r_f beyond the contact reach (activation 1e-6).
-CONTACT_CUTOFF_ACTIVATION = 1.0e-6
+#: The reach of a piece is widened by this margin (m) beyond its contact radius s0 and how
+#: far it can move in the interval, so that no contact is missed for a tick.
+REACH_MARGIN = 1.0e-3
 
 
 def contact_reach(products: np.ndarray) -> np.ndarray:
     """
     Return each piece's contact reach (m), shape (N,), from its product rows (N, W).
 
-    Two like pieces interact within the sum of their reaches: the centre distance where
-    the pair's activation falls to CONTACT_CUTOFF_ACTIVATION; beyond it the pair force is
-    below 1e-6 r_f and the pair is left out.
+    Two pieces touch where their centres are closer than the sum of their radii s0 (for
+    contact a piece is a sphere of radius s0).
     """
-    s0 = products[:, P_S0]
-    s_c = s0 * products[:, P_SC_RATIO]
-    tail = np.arctanh(1.0 - 2.0 * CONTACT_CUTOFF_ACTIVATION) / (
-        2.0 * np.arctanh(products[:, P_R_A]))
-    return 0.5 * (s0 + s_c) + tail * (s0 - s_c)
+    return products[:, P_S0].copy()
 
 
 def _pairs_within_reach(state: SimState, params: SimParams, t1: float,
                         y: np.ndarray) -> np.ndarray:
     """
-    Return the pairs (M, 2) within reach over the interval state.t .. t1.
+    Return the pairs (M, 2), local indices i < j, that can touch over state.t .. t1.
 
     The reach is widened by how far the pieces can move in the interval: their speed
-    relative to the cone, and a fall from rest.
+    relative to the cone, and a fall from rest, with REACH_MARGIN.
     """
     dt = t1 - state.t
     speed = np.linalg.norm(y[:, 3:6], axis=1)
-    reach = (contact_reach(state.products) + speed * dt
-             + 0.5 * params.model.g * dt * dt)
+    reach = (contact_reach(state.products) + 1.1 * (speed * dt + 0.5 * params.model.g * dt * dt)
+             + REACH_MARGIN)
     return contact_pairs(y[:, 0:3], reach)
+
+
+def _pair_keys(ids: np.ndarray) -> np.ndarray:
+    """Return one int64 key per pair of ids (K, 2), first < second: first * 2^32 + second."""
+    return (ids[:, 0].astype(np.int64) << 32) | ids[:, 1].astype(np.int64)
+
+
+def _histories(state: SimState, pairs: np.ndarray) -> np.ndarray:
+    """Return the history (M, 3) of each pair (local indices): the state's, or zeros."""
+    hist = np.zeros((pairs.shape[0], 3))
+    if not state.contact_ids.shape[0] or not pairs.shape[0]:
+        return hist
+    known = _pair_keys(state.contact_ids)
+    wanted = _pair_keys(state.ids[pairs])
+    at = np.searchsorted(known, wanted)
+    at = np.minimum(at, known.size - 1)
+    found = known[at] == wanted
+    hist[found] = state.contact_history[at[found]]
+    return hist
+
+
+def _keep_contacts(state: SimState, pairs: np.ndarray, hist: np.ndarray, status: np.ndarray,
+                   work: '_Work') -> None:
+    """Keep the histories of the pairs still touching, by ids, sorted, in ``work``."""
+    alive = (status[pairs[:, 0]] == ACTIVE) & (status[pairs[:, 1]] == ACTIVE)
+    touching = alive & np.any(hist != 0.0, axis=1)
+    ids = state.ids[pairs[touching]].reshape(-1, 2)
+    order = np.argsort(_pair_keys(ids), kind='stable')
+    work.contact_ids = np.ascontiguousarray(ids[order])
+    work.contact_history = np.ascontiguousarray(hist[touching][order])
 
 
 def _advance_alone(single: np.ndarray, state: SimState, params: SimParams,
@@ -474,145 +504,118 @@ def _advance_alone(single: np.ndarray, state: SimState, params: SimParams,
     stats[single] = ss
 
 
-def _advance_multirate(state: SimState, params: SimParams, profile: RotationProfile,
-                       t1: float, y: np.ndarray, step_size: np.ndarray, status: np.ndarray,
-                       t_event: np.ndarray, stats: np.ndarray,
-                       counters: np.ndarray) -> tuple[int, float]:
+def _advance_with_contacts(state: SimState, params: SimParams, profile: RotationProfile,
+                           t1: float, work: '_Work') -> None:
     """
-    Advance with piece-piece contact by multirate coupling (:mod:`coupling`).
+    Advance with contact between pieces: every pair within reach, with its history.
 
-    Pieces in no pair are advanced alone, as without contact; all pieces in pairs are
-    coupled, every pair within reach, whatever the size of the crowd. Returns the largest
-    contact island (pieces) and the proposed next coupling interval (s). Arguments as in
-    :func:`advance`'s arrays, updated in place; counters (COUPLING_STAT_WIDTH,).
+    Pieces in no pair are advanced alone, as without contact. The others by the multirate
+    coupling (:mod:`coupling`: all of them together, every pair) or, with
+    ``coupling: exact``, island by island as one system each (:mod:`exact`). The histories
+    of the pairs still touching at the end go into ``work`` (by ids), with the largest
+    island and the proposed next coupling interval. Arrays of ``work`` updated in place.
     """
-    solver = params.solver
-    machine = params.global_row
+    y, step_size, status, t_event, stats = (work.y, work.step_size, work.status,
+                                            work.t_event, work.stats)
     pairs = _pairs_within_reach(state, params, t1, y)
+    hist = _histories(state, pairs)
     islands = islands_of(state.count, pairs)
-    largest = max((len(members) for members, _ in islands), default=0)
-    seg_t, seg_omega, seg_domega = profile.segments(state.t, t1)
+    work.largest_island = max((len(members) for members, _, _ in islands), default=0)
+    segments = profile.segments(state.t, t1)
     coupled = np.zeros(state.count, dtype=bool)
     coupled[pairs.reshape(-1)] = True
-    _advance_alone(np.flatnonzero(~coupled), state, params, (seg_t, seg_omega, seg_domega), y,
-                   step_size, status, t_event, stats)
-    h_coupling = state.coupling_step or solver.h_init
+    _advance_alone(np.flatnonzero(~coupled), state, params, segments, y, step_size, status,
+                   t_event, stats)
+    if not pairs.shape[0]:
+        return
+    if params.model.interactions.coupling == 'multirate':
+        work.coupling_step = _advance_multirate(state, params, segments, pairs, hist, coupled,
+                                                work)
+    else:
+        for members, local, rows in islands:
+            island_hist = np.ascontiguousarray(hist[rows])
+            _advance_exact_island(state, params, profile, t1, members, local, island_hist,
+                                  work)
+            hist[rows] = island_hist
+    _keep_contacts(state, pairs, hist, status, work)
+
+
+def _advance_multirate(state: SimState, params: SimParams,
+                       segments: tuple[np.ndarray, np.ndarray, np.ndarray], pairs: np.ndarray,
+                       hist: np.ndarray, coupled: np.ndarray, work: '_Work') -> float:
+    """Advance the pieces in pairs by :func:`coupling.advance_coupled`; return the next H."""
+    solver = params.solver
     members = np.flatnonzero(coupled)
-    if not members.size:
-        return largest, h_coupling
     local = np.empty(state.count, dtype=np.int64)
     local[members] = np.arange(members.size)
+    y, step_size, status, t_event, stats = (work.y, work.step_size, work.status,
+                                            work.t_event, work.stats)
     ys, hs, st, te = (np.ascontiguousarray(y[members]), step_size[members], status[members],
                       t_event[members])
     ss = np.ascontiguousarray(stats[members])
     interactions = params.model.interactions
     h_coupling = advance_coupled(
-        ys, np.ascontiguousarray(state.products[members]), local[pairs], machine, seg_t,
-        seg_omega, seg_domega, params.model.r, hs, st, te, solver.rtol, params.atol,
-        solver.h_min, solver.h_max, solver.h_init, solver.max_steps, ss, interactions.pull_off,
-        h_coupling, interactions.coupling_tolerance, counters)
+        ys, np.ascontiguousarray(state.products[members]), local[pairs], hist,
+        params.interaction_row, params.global_row, *segments, params.model.r, hs, st, te,
+        solver.rtol, params.atol, solver.h_min, solver.h_max, solver.h_init, solver.max_steps,
+        ss, work.coupling_step or solver.h_init, interactions.coupling_tolerance,
+        work.counters)
     y[members], step_size[members], status[members], t_event[members] = ys, hs, st, te
     stats[members] = ss
-    return largest, float(h_coupling)
+    return float(h_coupling)
 
 
-def _advance_with_contacts(state: SimState, params: SimParams, profile: RotationProfile,
-                           t1: float, y: np.ndarray, step_size: np.ndarray,
-                           status: np.ndarray, t_event: np.ndarray,
-                           stats: np.ndarray) -> tuple[int, int]:
+def _advance_exact_island(state: SimState, params: SimParams, profile: RotationProfile,
+                          t1: float, members: np.ndarray, local: np.ndarray,
+                          hist: np.ndarray, work: '_Work') -> None:
     """
-    Advance with piece-piece contact, exactly: contact islands integrated as one system.
+    Advance one island as one system (:func:`exact.advance_island`), arrays in place.
 
-    Returns the number of pieces in the largest island and the pairs left out (islands
-    larger than ``max_island`` are cut by :func:`cut_island`).
-
-    The pairs are those within reach at the start of the interval, the reach widened by how
-    far the pieces can move in it (their speed relative to the cone, and a fall from rest).
-    A piece that leaves an island at the rim is taken out, and the rest of the island goes
-    on from the exit time. Arguments as in :func:`advance`'s arrays, updated in place.
+    A piece that reaches the rim is taken out at its exit time, with its pairs, and the rest
+    of the island goes on from there. hist (m, 3) the island's histories, in place (a pair
+    whose piece left gets zeros).
     """
     solver = params.solver
-    machine = params.global_row
-    pairs = _pairs_within_reach(state, params, t1, y)
-    islands = islands_of(state.count, pairs)
-    largest = max((len(members) for members, _ in islands), default=0)
-    limit = params.model.interactions.max_island
-    left_out = 0
-    if largest > limit:
-        kept = []
-        for members, local in islands:
-            if len(members) <= limit:
-                kept.append((members, local))
-                continue
-            parts, dropped = cut_island(members, local, limit)
-            kept += parts
-            left_out += dropped
-        islands = kept
-    alone = np.ones(state.count, dtype=bool)
-    for members, _ in islands:
-        alone[members] = False
-    _advance_alone(np.flatnonzero(alone), state, params, profile.segments(state.t, t1), y,
-                   step_size, status, t_event, stats)
-    pull_off = params.model.interactions.pull_off
-    for members, local in islands:
-        t_start = state.t
-        h = float(step_size[members].min())
-        while members.size:
-            seg = profile.segments(t_start, t1)
-            ys = np.ascontiguousarray(y[members])
-            counters = np.zeros(stats.shape[1], dtype=np.int64)
-            pos, width = band_order(members.size, local)
-            code, t_reached, h, first = advance_island(
-                ys, np.ascontiguousarray(state.products[members]), local, pos, 3 * width + 2,
-                machine, seg[0], seg[1], seg[2], params.model.r, h, solver.rtol, params.atol,
-                solver.h_min, solver.h_max, solver.h_init, solver.max_steps, pull_off,
-                counters)
-            y[members] = ys
-            # every member took the island's steps (its cost is per piece as well)
-            stats[members, STAT_ACCEPTED] += counters[STAT_ACCEPTED]
-            stats[members, STAT_REJECTED] += counters[STAT_REJECTED]
-            if code == ACTIVE:
-                step_size[members] = h
-                break
-            if code == EXITED:
-                gone = members[first]
-                status[gone] = EXITED
-                t_event[gone] = t_reached
-                t_start = t_reached
-                members = np.delete(members, first)
-                local = local[(local != first).all(axis=1)]
-                local = local - (local > first)
-                continue
-            status[members] = FAILED
-            t_event[members] = t_reached
-            stats[members, STAT_REASON] = counters[STAT_REASON]
-            break
-    return largest, left_out
-
-
-def cut_island(members: np.ndarray, local: np.ndarray,
-               limit: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], int]:
-    """
-    Cut an island into parts of at most ``limit`` pieces; return them and the pairs cut.
-
-    members (n,) piece indices, local (m, 2) its pairs as indices into members. The parts
-    are runs of the island's band order (:func:`band.band_order`), so touching pieces
-    mostly stay together; each part is (members, local pairs) like an island, its members
-    sorted. A part of one piece has no pairs.
-    """
-    pos, _ = band_order(members.size, local)
-    order = np.argsort(pos)
-    part_of = np.empty(members.size, dtype=np.int64)
-    part_of[order] = np.arange(members.size) // limit
-    inside = part_of[local[:, 0]] == part_of[local[:, 1]]
-    parts = []
-    where = np.empty(members.size, dtype=np.int64)
-    for part in range(int(part_of.max()) + 1):
-        chosen = np.flatnonzero(part_of == part)
-        where[chosen] = np.arange(chosen.size)
-        own = local[inside & (part_of[local[:, 0]] == part)]
-        parts.append((members[chosen], where[own]))
-    return parts, int((~inside).sum())
+    y, step_size, status, t_event, stats = (work.y, work.step_size, work.status,
+                                            work.t_event, work.stats)
+    t_start = state.t
+    h = float(step_size[members].min())
+    rows = np.arange(local.shape[0])
+    while members.size:
+        seg = profile.segments(t_start, t1)
+        ys = np.ascontiguousarray(y[members])
+        hs = np.ascontiguousarray(hist[rows])
+        counters = np.zeros(stats.shape[1], dtype=np.int64)
+        code, t_reached, h, first = advance_island(
+            ys, hs, np.ascontiguousarray(state.products[members]), local,
+            params.interaction_row, params.global_row, seg[0], seg[1], seg[2], params.model.r,
+            h, solver.rtol, params.atol, solver.h_min, solver.h_max, solver.h_init,
+            solver.max_steps, counters)
+        y[members] = ys
+        hist[rows] = hs
+        # every member took the island's steps (its cost is per piece as well)
+        stats[members, STAT_ACCEPTED] += counters[STAT_ACCEPTED]
+        stats[members, STAT_REJECTED] += counters[STAT_REJECTED]
+        if code == ACTIVE:
+            step_size[members] = h
+            return
+        if code == EXITED:
+            gone = members[first]
+            status[gone] = EXITED
+            t_event[gone] = t_reached
+            t_start = t_reached
+            members = np.delete(members, first)
+            with_it = (local == first).any(axis=1)
+            hist[rows[with_it]] = 0.0
+            rows = rows[~with_it]
+            local = local[~with_it]
+            local = local - (local > first)
+            continue
+        status[members] = FAILED
+        t_event[members] = t_reached
+        stats[members, STAT_REASON] = counters[STAT_REASON]
+        hist[rows] = 0.0
+        return
 
 
 def _failure(state: SimState, profile: RotationProfile, y: np.ndarray, i: int, t: float,
@@ -732,9 +735,9 @@ def warm_up() -> None:
     state, _ = add_particles(SimState(), params, [start], None, None, omega=0.0)
     advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
     advance_many([state], params, [RotationProfile.constant(1.0)], [1.0e-3])  # batched
-    # the contact kernels (neighbour search, multirate coupling, islands) with two touching
+    # the contact kernels (neighbour search, multirate and exact coupling) with two touching
     # pieces
-    other = (x + 0.04, 0.0, resting_height(model, model.product, x + 0.04, 0.0))
+    other = (x + 0.045, 0.0, resting_height(model, model.product, x + 0.045, 0.0))
     for coupling in ('multirate', 'exact'):
         touching = replace(model, interactions=replace(model.interactions, enabled=True,
                                                        coupling=coupling))
