@@ -30,15 +30,15 @@ pieces) and the median and longest tick. The states:
 
 Pieces start at seeded random places with rho in [0.03, 0.15] m. With ``--interactions``
 every row is measured twice, side by side: pieces alone (the paper's model) and pieces that
-touch (contact islands), both from places where no two pieces overlap (a lattice, in
-layers when one is not enough), with the cost ratio and the largest island; ``--coupling``
-picks how touching pieces are integrated (``exact``, the default, or ``multirate``, which
-adds its coupling intervals per simulated second). The calibration workload is printed
-first. Example::
+touch (the soft-sphere law, :mod:`cone_feeder_sim.physics.contact`), both from places where
+no two pieces overlap (a lattice, in layers when one is not enough), with the cost ratio,
+the largest contact island and the contacts; ``--coupling`` picks how touching pieces are
+integrated (``multirate``, the default, which adds its coupling intervals per simulated
+second, or ``exact``). The calibration workload is printed first. Example::
 
     .venv/bin/python benchmarks/bench_states.py --pieces 20 150 2000 5000
     .venv/bin/python benchmarks/bench_states.py --pieces 150 1000 --interactions
-    .venv/bin/python benchmarks/bench_states.py --pieces 54 --interactions --coupling multirate
+    .venv/bin/python benchmarks/bench_states.py --pieces 54 --interactions --coupling exact
 """
 
 import argparse
@@ -89,17 +89,11 @@ def places(count: int, lift: float, packed: bool = False) -> np.ndarray:
     return np.column_stack([x, y, z])
 
 
-#: Largest island coupled whole in the benchmark (--max-island): every island, by default.
-EXACT = 10 ** 6
-
-
 def engine_for(state: str, count: int, contacts: bool, packed: bool,
-               max_island: int = EXACT, coupling: str = 'exact',
+               coupling: str = 'multirate',
                tolerance: float = 1e-6) -> tuple[FeederEngine, int, int]:
     """Return the engine in ``state`` with ``count`` pieces, warm-up and measured ticks."""
-    model = ModelParams(interactions=InteractionParams(enabled=contacts,
-                                                       max_island=max_island,
-                                                       coupling=coupling,
+    model = ModelParams(interactions=InteractionParams(enabled=contacts, coupling=coupling,
                                                        coupling_tolerance=tolerance))
     if state == 'reversing':
         feed = FeedParams(rate=max(500.0, count), max_pieces=count)
@@ -118,11 +112,9 @@ def engine_for(state: str, count: int, contacts: bool, packed: bool,
 
 
 def measure(state: str, count: int, contacts: bool = False, packed: bool = False,
-            max_island: int = EXACT, coupling: str = 'exact',
-            tolerance: float = 1e-6) -> dict[str, float]:
+            coupling: str = 'multirate', tolerance: float = 1e-6) -> dict[str, float]:
     """Run one state with ``count`` pieces; return the figures."""
-    engine, warm, ticks = engine_for(state, count, contacts, packed, max_island, coupling,
-                                     tolerance)
+    engine, warm, ticks = engine_for(state, count, contacts, packed, coupling, tolerance)
     for _ in range(warm):
         engine.tick()
     durations, piece_seconds, steps, island, cut, intervals = [], 0.0, 0, 0, 0, 0
@@ -136,7 +128,7 @@ def measure(state: str, count: int, contacts: bool = False, packed: bool = False
                                       + len(result.failures))
         steps += result.stats.accepted + result.stats.rejected
         island = max(island, result.stats.largest_island)
-        cut = max(cut, result.stats.pairs_left_out)
+        cut = max(cut, result.stats.contacts)
         intervals += result.stats.coupling_intervals + result.stats.coupling_rejected
     wall = time.perf_counter() - wall0
     cpu = time.process_time() - cpu0
@@ -153,10 +145,7 @@ def main() -> None:
     parser.add_argument('--states', nargs='+', choices=STATES, default=list(STATES))
     parser.add_argument('--interactions', action='store_true',
                         help='measure each row without and with contact between pieces')
-    parser.add_argument('--max-island', type=int, default=EXACT,
-                        help='with --interactions: cut islands larger than this (default: '
-                             'none is cut, exact coupling)')
-    parser.add_argument('--coupling', choices=('exact', 'multirate'), default='exact',
+    parser.add_argument('--coupling', choices=('exact', 'multirate'), default='multirate',
                         help='with --interactions: how touching pieces are integrated')
     parser.add_argument('--coupling-tolerance', type=float, default=1e-6,
                         help='with --coupling multirate: interactions.coupling_tolerance (m)')
@@ -181,21 +170,21 @@ def compare(args: argparse.Namespace) -> None:
     """Print each state and count without and with contacts, side by side."""
     print('# pc-s/CPU-s without and with contact between pieces; cost ratio = with / '
           'without per particle-second; island = most pieces in one contact island; '
-          'cut = most pairs left out (islands cut at --max-island); coupling '
+          'contacts = most touching pairs at a tick end; coupling '
           f'{args.coupling} (tolerance {args.coupling_tolerance:g} m): '
           'steps = per particle-second alone / with contact, intervals = coupling '
           'intervals per simulated s (multirate)')
     print(f'{"state":>10} {"N":>6} {"without":>9} {"with":>9} {"ratio":>6} {"capacity":>9} '
-          f'{"max ms":>8} {"island":>9} {"cut":>6} {"steps":>13} {"intervals":>9}')
+          f'{"max ms":>8} {"island":>9} {"contacts":>8} {"steps":>13} {"intervals":>9}')
     for state in args.states:
         for count in args.pieces:
             alone = measure(state, count, False, packed=True)
-            touch = measure(state, count, True, packed=True, max_island=args.max_island,
-                            coupling=args.coupling, tolerance=args.coupling_tolerance)
+            touch = measure(state, count, True, packed=True, coupling=args.coupling,
+                            tolerance=args.coupling_tolerance)
             print(f'{state:>10} {int(touch["pieces"]):>6} {alone["per_cpu"]:>9.0f} '
                   f'{touch["per_cpu"]:>9.0f} {alone["per_cpu"] / touch["per_cpu"]:>6.2f} '
                   f'{touch["capacity"]:>9.2f} {touch["max_ms"]:>8.1f} '
-                  f'{int(touch["island"]):>9} {int(touch["cut"]):>6} '
+                  f'{int(touch["island"]):>9} {int(touch["cut"]):>8} '
                   f'{alone["steps"]:>6.0f}/{touch["steps"]:<6.0f} {touch["intervals"]:>9.0f}',
                   flush=True)
 

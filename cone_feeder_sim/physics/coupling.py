@@ -83,6 +83,7 @@ OMEGA_CAP = 1.0
 #: A pair about to touch cuts the interval at its touch time, but not below this fraction
 #: of the interval tried.
 TOUCH_FRACTION = 0.125
+TOUCH_CAP = True
 #: Crowds of fewer pieces are advanced on one thread: starting a parallel region costs more
 #: than it saves, and far more on a loaded machine (every interval starts one).
 PARALLEL_PIECES = 16
@@ -276,7 +277,7 @@ def interval_cap(y, products, pairs, status, inter, h):
                 continue
             closing = -((y[i, 3] - y[j, 3]) * d0 + (y[i, 4] - y[j, 4]) * d1
                         + (y[i, 5] - y[j, 5]) * d2) / dist
-            if closing > 0.0 and -delta < closing * cap:
+            if TOUCH_CAP and closing > 0.0 and -delta < closing * cap:
                 cap = max(-delta / closing, TOUCH_FRACTION * cap)
     return cap
 
