@@ -326,7 +326,7 @@ class InteractionParams:
     friction: float = 0.5
     pull_off: float = 0.05
     coupling: str = 'multirate'
-    coupling_tolerance: float = 1.0e-6
+    coupling_tolerance: float = 1.0e-8
 
     def __post_init__(self) -> None:
         """Validate the fields."""

@@ -219,9 +219,13 @@ class RunData:
             return None
         if str(enabled).lower() not in ('true', '1'):
             return 'off'
-        pull = self.metadata.get('interactions.pull_off', '?')
-        island = self.metadata.get('interactions.max_island', '?')
-        return f'on (pull-off {pull} N, max island {island})'
+        get = self.metadata.get
+        if 'interactions.restitution' not in self.metadata:
+            return (f"on (pull-off {get('interactions.pull_off', '?')} N, max island "
+                    f"{get('interactions.max_island', '?')}; the pair law before soft contact)")
+        return (f"on (restitution {get('interactions.restitution')}, friction "
+                f"{get('interactions.friction', '?')}, pull-off "
+                f"{get('interactions.pull_off', '?')} N, {get('interactions.coupling', '?')})")
 
     def exit_totals(self) -> ChannelTotals:
         """Return exits per channel over the layout's channels (more if exits name more)."""

@@ -45,7 +45,9 @@ class DiagnosticsWindow:
     step_max (s) total and longest tick; publish_s (s) total publishing; callback_max (s)
     longest executor callback; overruns: ticks longer than the period; lag_max (s) behind
     the wall clock; given_up (s) of simulation time beyond catch_up; integration steps
-    accepted and rejected; largest_island (pieces) and pairs_left_out of contact islands.
+    accepted and rejected; largest_island (pieces linked by pairs within reach) and
+    contacts (touching pairs) at most; coupling_forced: multirate coupling intervals
+    accepted at the shortest interval above interactions.coupling_tolerance.
     """
 
     def __init__(self, wall: float, sim: float) -> None:
@@ -63,7 +65,8 @@ class DiagnosticsWindow:
         self.accepted = 0
         self.rejected = 0
         self.largest_island = 0
-        self.pairs_left_out = 0
+        self.contacts = 0
+        self.coupling_forced = 0
 
     def count(self, result: TickResult, step_s: float, publish_s: float, period: float
               ) -> None:
@@ -77,7 +80,8 @@ class DiagnosticsWindow:
         self.accepted += result.stats.accepted
         self.rejected += result.stats.rejected
         self.largest_island = max(self.largest_island, result.stats.largest_island)
-        self.pairs_left_out = max(self.pairs_left_out, result.stats.pairs_left_out)
+        self.contacts = max(self.contacts, result.stats.contacts)
+        self.coupling_forced += result.stats.coupling_forced
 
 
 @dataclass
@@ -174,12 +178,12 @@ def simulation_status(node: str, window: DiagnosticsWindow, now: float, engine: 
                    f'{pacer.catch_up:g} s given up: simulation time runs slower')
     else:
         message = f'real-time factor {achieved:.2f} (target {rtf:g})'
-    if window.pairs_left_out and not paused:
+    if window.coupling_forced and not paused:
         level = WARN
-        message += (f'; a contact island of {window.largest_island} pieces was cut into '
-                    f'parts of at most interactions.max_island = '
-                    f'{engine.config.model.interactions.max_island}: '
-                    f'{window.pairs_left_out} pairs left out')
+        message += (f'; {window.coupling_forced} coupling intervals accepted above '
+                    f'interactions.coupling_tolerance = '
+                    f'{engine.config.model.interactions.coupling_tolerance:g} m (at the '
+                    f'shortest interval)')
     values = {
         'simulation time (s)': f'{engine.t:.6f}',
         'paused': str(paused),
@@ -198,7 +202,8 @@ def simulation_status(node: str, window: DiagnosticsWindow, now: float, engine: 
         'accepted steps': str(window.accepted),
         'rejected steps': str(window.rejected),
         'largest contact island (pieces)': str(window.largest_island),
-        'contact pairs left out (island cut)': str(window.pairs_left_out),
+        'touching pairs (max)': str(window.contacts),
+        'coupling intervals above tolerance': str(window.coupling_forced),
         'exits (total)': str(exits),
         'failures (total)': str(failures),
         'mass in (kg)': f'{res.mass_in:.6f}' if res is not None else '0',

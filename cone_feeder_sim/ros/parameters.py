@@ -42,9 +42,9 @@ from ..formats.parameter_file import config_dir, load_weigher_params
 from ..formats.runlog import DEFAULT_RECORD_PATH, model_parameter_values
 from ..formats.scenario_file import load_scenario
 from ..physics.params import (
-    CHANNEL_KEYS, COUPLING_CHOICES, INTERACTION_LIMITS, InteractionParams, Limit, MODEL_KEYS,
-    MODEL_LIMITS, model_params_from_mapping, ModelParams, PRODUCT_LIMITS, SOLVER_LIMITS,
-    SolverParams)
+    CHANNEL_KEYS, COUPLING_CHOICES, INTERACTION_KEYS, INTERACTION_LIMITS, InteractionParams,
+    Limit, MODEL_KEYS, MODEL_LIMITS, model_params_from_mapping, ModelParams, PRODUCT_LIMITS,
+    SOLVER_LIMITS, SolverParams)
 from ..weigher.machine import WEIGHER_LIMITS, WeigherParams
 
 __all__ = [
@@ -218,6 +218,8 @@ _MODEL_DESCRIPTIONS = {
     'r_a': 'default product: activation at the compression radius, eq. 32',
     'r_d': 'default product: dissipation coefficient of the constraint, eq. 34 (s/m)',
     'r_f': 'default product: maximum force of the constraint, eq. 34 (N)',
+    'young_modulus': "default product: Young's modulus (Pa), contact between pieces only",
+    'poisson_ratio': "default product: Poisson's ratio, contact between pieces only",
     'g': 'gravity (m/s^2)',
     'cone_diameter': 'cone diameter (m)',
     'cone_tilt': 'cone tilt (deg)',
@@ -228,6 +230,21 @@ _MODEL_DESCRIPTIONS = {
     'channel_count': 'number of dosing channels (equal sectors)',
     'channel_boundary': 'angle where channel 1 starts (deg, atan2(y, x))',
     'channel_numbering': 'channel numbering seen from above: clockwise | counter_clockwise',
+}
+
+#: The ``interactions.*`` parameters after ``enabled`` (doc/model.md, "Pieces that touch").
+_INTERACTION_DESCRIPTIONS = {
+    'restitution': 'pair law: restitution coefficient e, separation over closing speed of '
+                   'a collision (0 < e <= 1; sets the normal and tangential damping)',
+    'friction': 'pair law: Coulomb friction coefficient between two pieces',
+    'pull_off': 'pair law: force (N) that parts two just-touching default pieces (sizes the '
+                'cohesion)',
+    'coupling': "how pieces that touch are integrated: 'multirate' (each piece on its own "
+                'steps, pair forces coupled over error-controlled intervals, every pair '
+                "kept) or 'exact' (the pieces and their contact histories as one system: "
+                'the reference, whatever the cost)',
+    'coupling_tolerance': 'multirate coupling: largest position error (m) one coupling '
+                          'interval may give a piece',
 }
 
 _SOLVER_DESCRIPTIONS = {
@@ -351,24 +368,13 @@ def parameter_specs(base: ModelParams | None = None) -> list[ParamSpec]:
         ParamSpec('interactions.enabled', True, 'contact between pieces: they push, rub and '
                   "stick to each other (on in the node; off is the paper's model, where "
                   "pieces pass through each other); overrides the parameter file's value"),
-        ParamSpec('interactions.pull_off', model.interactions.pull_off, 'adhesion between two '
-                  'just-touching pieces (N); default from the parameter file',
-                  limit=INTERACTION_LIMITS['pull_off']),
-        ParamSpec('interactions.max_island', model.interactions.max_island, 'largest contact '
-                  'island integrated as one system (pieces); a larger one is cut into parts '
-                  'and the pairs between them are left out for the tick (WARN on '
-                  '/diagnostics); default from the parameter file',
-                  limit=INTERACTION_LIMITS['max_island']),
-        ParamSpec('interactions.coupling', model.interactions.coupling, 'how pieces that touch '
-                  "are integrated: 'exact' (contact islands as one system) or 'multirate' "
-                  '(each piece on its own steps, pair forces coupled over controlled '
-                  'intervals, no pair left out); default from the parameter file',
-                  constraints=f'one of {", ".join(COUPLING_CHOICES)}'),
-        ParamSpec('interactions.coupling_tolerance', model.interactions.coupling_tolerance,
-                  'multirate coupling: largest position error (m) one coupling interval may '
-                  'give a piece; default from the parameter file',
-                  limit=INTERACTION_LIMITS['coupling_tolerance']),
     ]
+    specs += [ParamSpec(f'interactions.{key}', getattr(model.interactions, key),
+                        f'{description}; default from the parameter file',
+                        limit=INTERACTION_LIMITS.get(key),
+                        constraints=(f'one of {", ".join(COUPLING_CHOICES)}'
+                                     if key == 'coupling' else ''))
+              for key, description in _INTERACTION_DESCRIPTIONS.items()]
     specs += model_param_specs(model)
     specs += weigher_param_specs()
     return specs
@@ -436,9 +442,7 @@ def model_from_values(values: dict[str, Any], base: ModelParams) -> ModelParams:
 def engine_config_from_values(values: dict[str, Any], base: ModelParams) -> EngineConfig:
     """Build and validate the whole engine configuration from parameter values."""
     model = replace(model_from_values(values, base), interactions=InteractionParams(
-        enabled=values['interactions.enabled'], pull_off=values['interactions.pull_off'],
-        max_island=values['interactions.max_island'], coupling=values['interactions.coupling'],
-        coupling_tolerance=values['interactions.coupling_tolerance']))
+        **{key: values[f'interactions.{key}'] for key in INTERACTION_KEYS}))
     solver = SolverParams(**{name[len('solver.'):]: value for name, value in values.items()
                              if name.startswith('solver.')})
     flat = _array(values['initial_pieces.positions'])

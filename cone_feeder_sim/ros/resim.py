@@ -81,6 +81,12 @@ def load_resim_plan(source: RunSource) -> ResimPlan:
         dt_ns = 1e9 / float(parameters['update_rate'])
     except (KeyError, TypeError, ValueError) as err:
         raise RecordingError(f'{where!r}: unreadable {METADATA_NAME} metadata: {err!r}') from err
+    if made_with_the_stiff_pair_law(parameters):
+        raise RecordingError(
+            f'{where!r} was recorded with contact between pieces under the pair law before '
+            'soft contact (no interactions.restitution): this version cannot re-simulate it '
+            'exactly; replay_node still plays it back (doc/model.md, "Why the pair law '
+            'changed")')
     events_topic = topics.get('~/events')
     states_topic = topics.get('particle_states')
     end = recording.metadata.get(END_METADATA_NAME, {})
@@ -108,6 +114,12 @@ def load_resim_plan(source: RunSource) -> ResimPlan:
 BEFORE_THEY_EXISTED: dict[str, Any] = {
     'interactions.coupling': 'exact',
     'interactions.coupling_tolerance': InteractionParams().coupling_tolerance}
+
+
+def made_with_the_stiff_pair_law(parameters: dict[str, Any]) -> bool:
+    """Return whether recorded node parameters had contact on under the old pair law."""
+    return (bool(parameters.get('interactions.enabled'))
+            and 'interactions.restitution' not in parameters)
 
 
 def recorded_parameter(plan: ResimPlan, name: str) -> tuple[bool, Any]:

@@ -261,8 +261,15 @@ def test_contact_setting_and_piece_size_come_from_the_metadata(
                                              'interactions.pull_off': '0.05',
                                              'interactions.max_island': '48',
                                              'model.s0': '0.03'})
-    assert on.contact() == 'on (pull-off 0.05 N, max island 48)'
+    assert on.contact() == ('on (pull-off 0.05 N, max island 48; the pair law before soft '
+                            'contact)')
     assert on.piece_radius() == 0.03
+    soft = dataclasses.replace(base, metadata={'interactions.enabled': 'true',
+                                               'interactions.restitution': '0.3',
+                                               'interactions.friction': '0.5',
+                                               'interactions.pull_off': '0.05',
+                                               'interactions.coupling': 'multirate'})
+    assert soft.contact() == 'on (restitution 0.3, friction 0.5, pull-off 0.05 N, multirate)'
     off = dataclasses.replace(base, metadata={'interactions.enabled': 'false'})
     assert off.contact() == 'off' and isinstance(off, RunData)
 

@@ -43,9 +43,10 @@ def test_simulation_status_says_when_the_node_cannot_keep_up() -> None:
     paused = simulation_status('/n', window, 12.0, engine, pacer, True, None, 0, 0, 0)
     assert paused['message'] == 'paused at t = 0.500 s'
     assert values(paused)['drive mode'] == 'not started'
-    window.pairs_left_out, window.largest_island = 7, 60
-    cut = simulation_status('/n', window, 10.5, engine, pacer, False, result, 0, 0, 0)
-    assert cut['level'] == 1 and 'a contact island of 60 pieces was cut' in cut['message']
+    window.coupling_forced, window.contacts = 7, 60
+    forced = simulation_status('/n', window, 10.5, engine, pacer, False, result, 0, 0, 0)
+    assert forced['level'] == 1 and '7 coupling intervals accepted above' in forced['message']
+    assert values(forced)['touching pairs (max)'] == '60'
 
 
 def test_recording_and_weigher_statuses() -> None:

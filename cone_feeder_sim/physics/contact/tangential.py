@@ -19,9 +19,10 @@ Each contact keeps its tangential displacement xi (m, 3-vector in the tangent pl
 relative displacement of the two pieces' surfaces accumulated over the contact (LIGGGHTS
 ``tangential_model_history``). The spring's stiffness is S_t = 8 G* sqrt(R* delta). The
 force is -S_t xi - gamma_t v_t while the spring holds (gamma_t = 2 sqrt(5/6) |beta|
-sqrt(S_t m*), the tangential damping), and mu |F_n| against xi once the spring would pull
-harder (or as hard: with mu = 0, or no normal force, the contact has no tangential force
-at all): then the contact slides and its history is rescaled to the cap. Sticking between
+sqrt(S_t m*), the tangential damping), that force scaled down to mu |F_n| where it would
+exceed it, and mu |F_n| against xi once the spring alone would pull harder (or as hard:
+with mu = 0, or no normal force, the contact has no tangential force at all): then the
+contact slides and its history is rescaled to the cap. Sticking between
 pieces is thus elastic, with no stiff regularisation. The history is dropped when the
 contact ends.
 """
@@ -49,7 +50,8 @@ def mindlin(h0, h1, h2, t0, t1, t2, s_t, m_star, beta, cap):
     Return the tangential force (3 floats, N) and whether the contact slides.
 
     h (m) the history, t (m/s) the tangential relative velocity, s_t (N/m) the spring's
-    stiffness, cap (N) = mu |F_n|.
+    stiffness, cap (N) = mu |F_n|. The spring and its damping together are capped (LAMMPS
+    and LIGGGHTS cap the sum): a force that would exceed the cap is scaled down to it.
     """
     size = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
     if s_t * size >= cap * (1.0 - SLIDING_MARGIN):  # no cap (mu = 0, F_n = 0): none holds
@@ -58,7 +60,12 @@ def mindlin(h0, h1, h2, t0, t1, t2, s_t, m_star, beta, cap):
         scale = -cap / size
         return scale * h0, scale * h1, scale * h2, True
     gamma = -2.0 * SQRT_FIVE_SIXTHS * beta * math.sqrt(s_t * m_star)
-    return -s_t * h0 - gamma * t0, -s_t * h1 - gamma * t1, -s_t * h2 - gamma * t2, False
+    f0, f1, f2 = -s_t * h0 - gamma * t0, -s_t * h1 - gamma * t1, -s_t * h2 - gamma * t2
+    total = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+    if total > cap:
+        scale = cap / total
+        return scale * f0, scale * f1, scale * f2, True
+    return f0, f1, f2, False
 
 
 @jit
