@@ -53,7 +53,7 @@ from .tracks import read_tracks, Tracks
 from ..errors import ConeFeederError, ScenarioError
 from ..feeder.scenario import Scenario
 from ..formats.parameter_file import read_yaml
-from ..formats.runlog import model_parameter_values
+from ..formats.runlog import interaction_values, model_parameter_values
 from ..formats.scenario_file import scenario_from_mapping, set_scenario_key
 from ..physics.params import check_section
 from ..physics.simulation import cone_surface_height
@@ -190,7 +190,7 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     if not isinstance(free, Mapping) or not free:
         raise ScenarioError('free must be a non-empty mapping of dotted scenario keys to '
                             '[low, high]')
-    defaults = model_parameter_values(scenario.model)
+    defaults = {**model_parameter_values(scenario.model), **interaction_values(scenario.model)}
     keys, bounds, start = [], [], []
     for key, limits in free.items():
         key = str(key)

@@ -391,7 +391,7 @@ def with_neighbours(seed: int | None, rotation: Any = None) -> dict[str, Any]:
     cone and no closer than 50 mm to any other piece. The five samples keep ids 0-4.
     """
     content = variant(rotation)
-    content['interactions'] = {'enabled': True, 'max_island': 1000}
+    content['interactions'] = {'enabled': True}
     if seed is None:
         return content
     rng = np.random.default_rng(seed)

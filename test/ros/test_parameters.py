@@ -27,8 +27,8 @@ from typing import Any
 from cone_feeder_sim.errors import ConeFeederError
 from cone_feeder_sim.feeder.engine import DriveParams, ENGINE_LIMITS, EngineConfig, FeedParams
 from cone_feeder_sim.physics.params import (
-    Limit, MODEL_LIMITS, model_params_from_mapping, PRODUCT_LIMITS, SOLVER_LIMITS,
-    solver_params_from_mapping)
+    INTERACTION_LIMITS, InteractionParams, Limit, MODEL_LIMITS, model_params_from_mapping,
+    PRODUCT_LIMITS, SOLVER_LIMITS, solver_params_from_mapping)
 from cone_feeder_sim.ros.parameters import parameter_specs, table_i_pieces
 from cone_feeder_sim.ros.sim_node import SimNode
 from cone_feeder_sim.weigher.machine import WEIGHER_LIMITS, WeigherParams
@@ -52,6 +52,8 @@ VALIDATION: dict[str, Callable[[Any], object]] = {
        for key in (*PRODUCT_LIMITS, *MODEL_LIMITS)},
     **{f'solver.{key}': (lambda value, key=key: solver_params_from_mapping({key: value}))
        for key in SOLVER_LIMITS},
+    **{f'interactions.{key}': (lambda value, key=key: InteractionParams(**{key: value}))
+       for key in INTERACTION_LIMITS},
     'max_angular_velocity': _drive('max_angular_velocity'),
     'max_angular_acceleration': _drive('max_angular_acceleration'),
     'cmd_timeout': _drive('cmd_timeout'),
@@ -68,7 +70,8 @@ VALIDATION: dict[str, Callable[[Any], object]] = {
 }
 
 #: The tables the node's ranges must come from.
-TABLES = (PRODUCT_LIMITS, MODEL_LIMITS, SOLVER_LIMITS, ENGINE_LIMITS, WEIGHER_LIMITS)
+TABLES = (PRODUCT_LIMITS, MODEL_LIMITS, SOLVER_LIMITS, ENGINE_LIMITS, WEIGHER_LIMITS,
+          INTERACTION_LIMITS)
 
 
 def edges(limit: Limit, integer: bool) -> list[Any]:

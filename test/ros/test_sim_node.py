@@ -509,16 +509,15 @@ def test_the_executor_runs_while_a_tick_does(ros: Ros) -> None:
 
 
 def test_the_executor_answers_while_a_real_contact_tick_runs(ros: Ros) -> None:
-    # a crowd dropped in three layers, coupled exactly as one island: its ticks are long
-    # (0.4-2 s measured) and the executor keeps answering services and publishing.
+    # a crowd dropped in three layers, every pair coupled: its ticks are long and the
+    # executor keeps answering services and publishing.
     # test_engine's GIL test is the one that fails when a kernel holds the GIL; this one
     # did not fail when the island kernels were compiled without nogil (not understood)
     from diagnostic_msgs.msg import DiagnosticArray
     positions = crowd_in_layers().reshape(-1).tolist()
     sim = ros.sim(**{'feed.rate': 0.0, 'markers.rate': 0.0, 'open_loop_pattern': [],
                      'start_paused': True, 'initial_pieces.positions': positions,
-                     'initial_pieces.d': [], 'interactions.coupling': 'exact',
-                     'interactions.max_island': 100000, 'diagnostics.period': 0.05})
+                     'initial_pieces.d': [], 'diagnostics.period': 0.05})
     assert sim.engine.piece_count == len(positions) // 3 > 100
     tick = sim.engine.tick
     spans: list[tuple[float, float]] = []

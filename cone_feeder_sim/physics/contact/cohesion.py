@@ -74,9 +74,16 @@ def density_for_pull_off(pull_off: float, y_star: float, r_i: float, r_j: float)
     if pull_off <= 0.0:
         return 0.0
     r_star = r_i * r_j / (r_i + r_j)
-    guess = (3.0 * y_star ** 2 * pull_off / (2.0 * math.pi ** 3 * r_star ** 2)) ** (1.0 / 3.0)
+    if not r_star > 0.0:  # radii that underflow (a limit's edge): nothing to size
+        return 0.0
+    guess = ((3.0 * pull_off / (2.0 * math.pi ** 3)) ** (1.0 / 3.0) * y_star ** (2.0 / 3.0)
+             / r_star ** (2.0 / 3.0))
     lo, hi = guess / 4.0, guess * 4.0
-    while largest_pull(hi, y_star, r_i, r_j) < pull_off:
+    for _ in range(64):
+        if largest_pull(hi, y_star, r_i, r_j) >= pull_off:
+            break
         hi *= 4.0
+    else:  # degenerate sizes (far below a millimetre): no density reaches the pull
+        return guess if math.isfinite(guess) else 0.0
     return brentq(lambda k: largest_pull(k, y_star, r_i, r_j) - pull_off, lo, hi,
                   xtol=1e-14 * guess, rtol=1e-12)
