@@ -99,9 +99,10 @@ def density_for(pull_off: float, a: Piece = Piece(), b: Piece = Piece()) -> floa
 def pair_force(a: Piece, b: Piece, law: Law, d: np.ndarray, u: np.ndarray,
                xi: np.ndarray) -> tuple[np.ndarray, float, float]:
     """
-    Return the force on a (N, (3,)), the normal force F_n (N, cohesion included, > 0
-    pushes) and the spring stiffness S_t (N/m); d = x_a - x_b, u = v_a - v_b, xi the
-    history (m, (3,)). Zero apart.
+    Return the force on a (N, (3,)), the normal force F_n (N) and S_t (N/m).
+
+    F_n includes the cohesion (> 0 pushes); d = x_a - x_b, u = v_a - v_b, xi the history
+    (m, (3,)). Zero apart.
     """
     dist = float(np.linalg.norm(d))
     delta = a.s0 + b.s0 - dist

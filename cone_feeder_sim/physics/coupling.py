@@ -454,8 +454,8 @@ def advance_coupled(y, products, pairs, hist, inter, machine, seg_t, seg_omega, 
         if not (ratio <= 1.0):
             counters[CST_FORCED] += 1
         counters[CST_ACCEPTED] += 1
-        grow = FAC_MAX if ratio == 0.0 else min(FAC_MAX, max(FAC_MIN,
-                                                            SAFETY * ratio ** (-1.0 / ORDER)))
+        grow = FAC_MAX if ratio == 0.0 else min(
+            FAC_MAX, max(FAC_MIN, SAFETY * ratio ** (-1.0 / ORDER)))
         if rejected:
             grow = min(grow, 1.0)
         h_next = min(h_max, hc * grow)

@@ -473,8 +473,10 @@ def _roots(count, pairs):
     return parent
 
 
-def islands_of(count: int, pairs: np.ndarray) -> list[tuple[np.ndarray, np.ndarray,
-                                                             np.ndarray]]:
+Island = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def islands_of(count: int, pairs: np.ndarray) -> list[Island]:
     """
     Return the islands of ``count`` pieces linked by ``pairs`` (M, 2), i < j.
 

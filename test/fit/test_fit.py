@@ -284,8 +284,9 @@ def test_the_pair_law_is_identified_from_tracks_of_colliding_pieces(tmp_path: Pa
                     {'position': [-0.0251, 0.05, 20.0], 'velocity': [0.4, 0.25, 0.0]},
                     {'position': [0.0251, 0.05, 20.0], 'velocity': [-0.4, -0.25, 0.0]}]}
     simulated = set_scenario_key(scenario, 'model.young_modulus', truth['young_modulus'])
-    simulated['interactions'] = {'enabled': True, 'coupling': 'exact', **{k: truth[k] for k in
-                                                     ('restitution', 'friction', 'pull_off')}}
+    simulated['interactions'] = {'enabled': True, 'coupling': 'exact',
+                                 **{k: truth[k] for k in ('restitution', 'friction',
+                                                          'pull_off')}}
     write_tracks(tmp_path / 'tracks.csv', simulated, 200.0, 1e-4, 3)
     free = {'interactions.restitution': [0.05, 1.0], 'interactions.friction': [0.0, 1.5],
             'interactions.pull_off': [0.0, 0.5], 'model.young_modulus': [1.0e4, 2.0e5]}

@@ -45,17 +45,21 @@ def hertz_theory(a: Piece, b: Piece, v: float) -> dict[str, float]:
 
 def collision(v: float, restitution: float = 0.3, friction: float = 0.5, pull_off: float = 0.0,
               tangential: float = 0.0, coupling: str = 'multirate',
-              products: tuple[ProductParams, ProductParams] = (ProductParams(), ProductParams()),
+              products: tuple[ProductParams, ProductParams] | None = None,
               samples: np.ndarray | None = None, t_end: float | None = None,
-              solver: SolverParams = SolverParams()) -> tuple[Simulator, list[tuple[float, np.ndarray, np.ndarray]]]:
+              solver: SolverParams | None = None) -> tuple[Simulator, list]:
     """
-    Collide two pieces at closing speed v (m/s) along x, sliding at ``tangential`` (m/s)
-    along y, from 10 um apart; return the Simulator and (t, q, qdot) at each sample time.
+    Collide two pieces at closing speed v (m/s) along x, from 10 um apart.
+
+    They slide at ``tangential`` (m/s) along y. Returns the Simulator and (t, q, qdot) at 0
+    and at each sample time. Default products: two default pieces.
     """
+    products = products or (ProductParams(), ProductParams())
     model = ModelParams(interactions=InteractionParams(
         enabled=True, restitution=restitution, friction=friction, pull_off=pull_off,
         coupling=coupling))
-    sim = Simulator(SimParams(model=model, solver=solver), RotationProfile.from_table(STILL))
+    sim = Simulator(SimParams(model=model, solver=solver or SolverParams()),
+                    RotationProfile.from_table(STILL))
     gap = products[0].s0 + products[1].s0 + 1e-5
     sim.add(np.array([[-gap / 2, 0.0, HEIGHT], [gap / 2, 0.0, HEIGHT]]),
             np.array([[v / 2, tangential / 2, 0.0], [-v / 2, -tangential / 2, 0.0]]),
@@ -120,9 +124,10 @@ def test_the_exact_coupling_gives_the_restitution_too() -> None:
 
 def one_dimensional_drop(piece: Piece, v_n: float, e: float, mu: float) -> float:
     """
-    Return the drop of the relative tangential speed (m/s) of a gross-sliding collision,
-    from the 1-D law integrated apart: m* delta'' = -F_n(delta, delta'), m* dv_t = mu |F_n| dt
-    (the product's reading: friction capped by mu |F_n|, also while F_n pulls), for two
+    Return the drop of the relative tangential speed (m/s) of a gross-sliding collision.
+
+    From the 1-D law integrated apart: m* delta'' = -F_n(delta, delta'), m* dv_t = mu |F_n|
+    dt (the product's reading: friction capped by mu |F_n|, also while F_n pulls), for two
     pieces like ``piece``.
     """
     r, m, y, _ = effective(piece, piece)

@@ -111,8 +111,10 @@ S_T = 8.0 * G_STAR * np.sqrt(0.0125 * ONE_NEWTON)
 def loaded_piece(load: float, t_end: float, ramp: float = 0.1,
                  dt: float = 2e-5) -> tuple[float, float, float, float]:
     """
-    Press a piece onto another held fixed with 1 N along the normal and push it along the
-    tangent with a load that rises to ``load`` N over ``ramp`` s; return its tangential
+    Press a piece on a fixed one, push it sideways; return its motion and the forces.
+
+    The piece is pressed with 1 N along the normal and pushed along the tangent with a
+    load that rises to ``load`` N over ``ramp`` s. Returns its tangential
     displacement (m) and speed (m/s) at t_end (s), and the contact's last tangential
     force (N, along the tangent) and normal force F_n (N).
 

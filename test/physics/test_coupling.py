@@ -56,8 +56,9 @@ def crowd(m: ModelParams) -> np.ndarray:
 
 
 def run(m: ModelParams, table: list, positions: np.ndarray, t_end: float, dt: float = 0.02,
-        solver: SolverParams = SolverParams()) -> tuple[Simulator, list]:
-    sim = Simulator(SimParams(model=m, solver=solver), RotationProfile.from_table(table))
+        solver: SolverParams | None = None) -> tuple[Simulator, list]:
+    sim = Simulator(SimParams(model=m, solver=solver or SolverParams()),
+                    RotationProfile.from_table(table))
     sim.add(positions)
     results = []
     for k in range(1, int(round(t_end / dt)) + 1):
@@ -102,7 +103,7 @@ def test_pieces_out_of_reach_move_exactly_as_without_interactions(coupling: str)
 
 @pytest.fixture(scope='module')
 def crowds() -> dict[str, np.ndarray]:
-    """The crowd after 0.4 s on the reversing cone: multirate, exact and contact off."""
+    """Return the crowd after 0.4 s on the reversing cone: multirate, exact and off."""
     out = {}
     for name, m in (('multirate', contact()), ('exact', contact('exact')),
                     ('off', contact(enabled=False))):

@@ -34,8 +34,8 @@ the paper's law (:mod:`..model`).
 
 from .collision import Collision, head_on_collision
 from .law import (
-    contact_force, contact_force_py, history_update, interaction_row, INTERACTION_WIDTH,
-    I_BETA, I_COHESION, I_MU, pair_constants, separated)
+    contact_force, contact_force_py, history_update, I_BETA, I_COHESION, I_MU,
+    interaction_row, INTERACTION_WIDTH, pair_constants, separated)
 
 __all__ = ['Collision', 'contact_force', 'contact_force_py', 'head_on_collision',
            'history_update', 'I_BETA', 'I_COHESION', 'I_MU', 'interaction_row',

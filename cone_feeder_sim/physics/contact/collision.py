@@ -38,9 +38,10 @@ __all__ = ['Collision', 'head_on_collision']
 @dataclass(frozen=True)
 class Collision:
     """
-    A head-on collision: restitution (separation over closing speed; 0 if the pieces
-    stay together), duration (s) of the contact (0 < delta), the largest overlap (m) and
-    the largest push (N).
+    A head-on collision.
+
+    restitution (separation over closing speed; 0 if the pieces stay together), duration
+    (s) of the contact (0 < delta), the largest overlap (m) and the largest push (N).
     """
 
     restitution: float
