@@ -59,8 +59,7 @@ import math
 import numba
 import numpy as np
 
-from .contact import contact_force, history_update
-from .contact.law import pair_constants
+from .contact.law import force_between, moved_force, pair_constants
 from .integrator import ACTIVE, advance_particle, GROUPS, STAT_REASON
 from .model import STATE_SIZE
 from .params import P_M
@@ -168,9 +167,8 @@ def pair_forces(y, products, pairs, hist, status, inter, out):
         if status[i] != ACTIVE or status[j] != ACTIVE:
             out[q, 0] = out[q, 1] = out[q, 2] = 0.0
             continue
-        f = contact_force(y[i, 0] - y[j, 0], y[i, 1] - y[j, 1], y[i, 2] - y[j, 2],
-                          y[i, 3] - y[j, 3], y[i, 4] - y[j, 4], y[i, 5] - y[j, 5],
-                          hist[q, 0], hist[q, 1], hist[q, 2], products[i], products[j], inter)
+        f = force_between(y[i], y[j], hist[q, 0], hist[q, 1], hist[q, 2], products[i],
+                          products[j], inter)
         out[q, 0] = f[0]
         out[q, 1] = f[1]
         out[q, 2] = f[2]
@@ -206,13 +204,11 @@ def predict(y, accel, products, pairs, hist, status, inter, h, out):
         u0 += a0 * h
         u1 += a1 * h
         u2 += a2 * h
-        g0, g1, g2 = history_update(hist[q, 0], hist[q, 1], hist[q, 2], e0, e1, e2, d0, d1,
-                                    d2, u0, u1, u2, products[i], products[j], inter)
-        f = contact_force(d0, d1, d2, u0, u1, u2, g0, g1, g2, products[i], products[j],
-                          inter)
-        out[q, 0] = f[0]
-        out[q, 1] = f[1]
-        out[q, 2] = f[2]
+        f = moved_force(hist[q, 0], hist[q, 1], hist[q, 2], e0, e1, e2, d0, d1, d2, u0, u1,
+                        u2, products[i], products[j], inter)
+        out[q, 0] = f[3]
+        out[q, 1] = f[4]
+        out[q, 2] = f[5]
 
 
 @jit
@@ -237,18 +233,12 @@ def correct(y0, y1, products, pairs, hist, status, inter, hist_out, out):
         u0 = y1[i, 3] - y1[j, 3]
         u1 = y1[i, 4] - y1[j, 4]
         u2 = y1[i, 5] - y1[j, 5]
-        g0, g1, g2 = history_update(
-            hist[q, 0], hist[q, 1], hist[q, 2], d0 - (y0[i, 0] - y0[j, 0]),
-            d1 - (y0[i, 1] - y0[j, 1]), d2 - (y0[i, 2] - y0[j, 2]), d0, d1, d2, u0, u1, u2,
-            products[i], products[j], inter)
-        hist_out[q, 0] = g0
-        hist_out[q, 1] = g1
-        hist_out[q, 2] = g2
-        f = contact_force(d0, d1, d2, u0, u1, u2, g0, g1, g2, products[i], products[j],
-                          inter)
-        out[q, 0] = f[0]
-        out[q, 1] = f[1]
-        out[q, 2] = f[2]
+        f = moved_force(hist[q, 0], hist[q, 1], hist[q, 2], d0 - (y0[i, 0] - y0[j, 0]),
+                        d1 - (y0[i, 1] - y0[j, 1]), d2 - (y0[i, 2] - y0[j, 2]), d0, d1, d2,
+                        u0, u1, u2, products[i], products[j], inter)
+        for a in range(3):
+            hist_out[q, a] = f[a]
+            out[q, a] = f[3 + a]
 
 
 @jit
@@ -260,10 +250,7 @@ def interval_cap(y, products, pairs, status, inter, h):
         j = pairs[q, 1]
         if status[i] != ACTIVE or status[j] != ACTIVE:
             continue
-        f = contact_force(y[i, 0] - y[j, 0], y[i, 1] - y[j, 1], y[i, 2] - y[j, 2],
-                          y[i, 3] - y[j, 3], y[i, 4] - y[j, 4], y[i, 5] - y[j, 5], 0.0, 0.0,
-                          0.0, products[i], products[j], inter)
-        delta = f[3]
+        delta = force_between(y[i], y[j], 0.0, 0.0, 0.0, products[i], products[j], inter)[3]
         if delta > 0.0:
             r_star, m_star, y_star, _ = pair_constants(products[i], products[j])
             s_n = 2.0 * y_star * math.sqrt(r_star * delta)

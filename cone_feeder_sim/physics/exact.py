@@ -41,7 +41,7 @@ import numba
 import numpy as np
 
 from .contact import contact_force
-from .contact.law import I_MU
+from .contact.law import force_between, I_MU
 from .contact.tangential import rotate_and_cap, SLIDING_MARGIN
 from .integrator import (
     ACTIVE, after_acceptance, error_norm, EXITED, FAILED, locate_exit,
@@ -111,9 +111,8 @@ def island_rhs(y, hist, products, pairs, inter, machine, omega, domega, out, his
     for q in range(pairs.shape[0]):
         i = pairs[q, 0]
         j = pairs[q, 1]
-        f = contact_force(y[i, 0] - y[j, 0], y[i, 1] - y[j, 1], y[i, 2] - y[j, 2],
-                          y[i, 3] - y[j, 3], y[i, 4] - y[j, 4], y[i, 5] - y[j, 5],
-                          hist[q, 0], hist[q, 1], hist[q, 2], products[i], products[j], inter)
+        f = force_between(y[i], y[j], hist[q, 0], hist[q, 1], hist[q, 2], products[i],
+                          products[j], inter)
         mi = products[i, P_M]
         mj = products[j, P_M]
         for a in range(3):

@@ -32,11 +32,10 @@ in the frame turning with the cone (the integrator's velocities). The cone conta
 the paper's law (:mod:`..model`).
 """
 
-from .collision import Collision, head_on_collision
 from .law import (
-    contact_force, contact_force_py, history_update, I_BETA, I_COHESION, I_MU,
-    interaction_row, INTERACTION_WIDTH, pair_constants, separated)
+    contact_force, contact_force_py, force_between, history_update, I_BETA, I_COHESION,
+    I_MU, interaction_row, INTERACTION_WIDTH, moved_force, pair_constants)
 
-__all__ = ['Collision', 'contact_force', 'contact_force_py', 'head_on_collision',
-           'history_update', 'I_BETA', 'I_COHESION', 'I_MU', 'interaction_row',
-           'INTERACTION_WIDTH', 'pair_constants', 'separated']
+__all__ = ['contact_force', 'contact_force_py', 'force_between', 'history_update',
+           'I_BETA', 'I_COHESION', 'I_MU', 'interaction_row', 'INTERACTION_WIDTH',
+           'moved_force', 'pair_constants']

@@ -41,11 +41,12 @@ import numpy as np
 from .cohesion import contact_area, density_for_pull_off
 from .normal import damping_ratio, hertz
 from .tangential import mindlin, rotate_and_cap
-from ..params import ModelParams, P_G_COMPLIANCE, P_M, P_S0, P_Y_COMPLIANCE
+from ..params import (
+    ModelParams, P_G_COMPLIANCE, P_M, P_S0, P_Y_COMPLIANCE, product_row)
 
-__all__ = ['contact_force', 'contact_force_py', 'history_update', 'interaction_row',
-           'INTERACTION_WIDTH', 'I_BETA', 'I_COHESION', 'I_MU', 'pair_constants',
-           'separated']
+__all__ = ['contact_force', 'contact_force_py', 'force_between', 'history_update',
+           'interaction_row', 'INTERACTION_WIDTH', 'I_BETA', 'I_COHESION', 'I_MU',
+           'moved_force', 'pair_constants']
 
 jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
@@ -62,8 +63,8 @@ def interaction_row(model: ModelParams) -> np.ndarray:
     at most ``pull_off`` (:func:`.cohesion.density_for_pull_off`).
     """
     inter, product = model.interactions, model.product
-    nu, e = product.poisson_ratio, product.young_modulus
-    y_star = 1.0 / (2.0 * (1.0 - nu * nu) / e)
+    default = product_row(product)
+    y_star = pair_constants(default, default)[2]
     row = np.array([damping_ratio(inter.restitution), inter.friction,
                     density_for_pull_off(inter.pull_off, y_star, product.s0, product.s0)])
     row.setflags(write=False)
@@ -78,13 +79,6 @@ def pair_constants(pi, pj):
     y_star = 1.0 / (pi[P_Y_COMPLIANCE] + pj[P_Y_COMPLIANCE])
     g_star = 1.0 / (pi[P_G_COMPLIANCE] + pj[P_G_COMPLIANCE])
     return r_star, m_star, y_star, g_star
-
-
-@jit
-def separated(d0, d1, d2, pi, pj):
-    """Tell whether two pieces at the position difference d (m) do not overlap."""
-    reach = pi[P_S0] + pj[P_S0]
-    return d0 * d0 + d1 * d1 + d2 * d2 >= reach * reach
 
 
 @jit
@@ -129,6 +123,31 @@ def history_update(h0, h1, h2, e0, e1, e2, d0, d1, d2, u0, u1, u2, pi, pj, inter
         return 0.0, 0.0, 0.0
     return rotate_and_cap(h0 + e0, h1 + e1, h2 + e2, n0, n1, n2, s_t,
                           inter[I_MU] * abs(f_n))
+
+
+@jit
+def force_between(yi, yj, h0, h1, h2, pi, pj, inter):
+    """
+    Return :func:`contact_force` of pieces i and j from their state rows yi, yj.
+
+    The rows are the integrator's (positions 0-2, velocities 3-5, cone frame); h the
+    contact's history (m).
+    """
+    return contact_force(yi[0] - yj[0], yi[1] - yj[1], yi[2] - yj[2], yi[3] - yj[3],
+                         yi[4] - yj[4], yi[5] - yj[5], h0, h1, h2, pi, pj, inter)
+
+
+@jit
+def moved_force(h0, h1, h2, e0, e1, e2, d0, d1, d2, u0, u1, u2, pi, pj, inter):
+    """
+    Return the history after the displacement e and the force with it (6 floats: m, N).
+
+    :func:`history_update` then :func:`contact_force` at the position and velocity
+    differences d (m), u (m/s) reached.
+    """
+    g0, g1, g2 = history_update(h0, h1, h2, e0, e1, e2, d0, d1, d2, u0, u1, u2, pi, pj, inter)
+    f = contact_force(d0, d1, d2, u0, u1, u2, g0, g1, g2, pi, pj, inter)
+    return g0, g1, g2, f[0], f[1], f[2]
 
 
 def contact_force_py(dx: object, du: object, history: object, pi: object, pj: object,
