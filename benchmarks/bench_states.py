@@ -147,8 +147,10 @@ def main() -> None:
                         help='measure each row without and with contact between pieces')
     parser.add_argument('--coupling', choices=('exact', 'multirate'), default='multirate',
                         help='with --interactions: how touching pieces are integrated')
-    parser.add_argument('--coupling-tolerance', type=float, default=1e-6,
-                        help='with --coupling multirate: interactions.coupling_tolerance (m)')
+    parser.add_argument('--coupling-tolerance', type=float,
+                        default=InteractionParams().coupling_tolerance,
+                        help='with --coupling multirate: interactions.coupling_tolerance (m); '
+                             "default: the product's")
     args = parser.parse_args()
     print(calibration_line())
     if args.interactions:
