@@ -33,6 +33,7 @@ Exit codes: 0 success, 2 bad input (scenario or arguments), 1 other errors; 130 
 import argparse
 from collections.abc import Callable, Iterator, Sequence
 import contextlib
+import dataclasses
 import os
 from pathlib import Path
 import signal
@@ -220,6 +221,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help='draw the tracks against the fitted simulation, and the residuals')
     fit.add_argument('--tracks', metavar='TRACKS',
                      help="tracks (CSV) or a recording (RUN.mcap) instead of the fit file's")
+    fit.add_argument('--quick', action='store_true',
+                     help="one start (the fit file's values) instead of the fit file's "
+                          'starts (8 by default)')
     fit.add_argument('--scheduler', metavar='ADDRESS',
                      help="run the fit's simulations on a running Dask scheduler "
                           "(tcp://host:port), the sweep's cluster; default: this process")
@@ -387,6 +391,8 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
 
     check_cluster(args)
     spec = load_fit(args.fit, args.tracks)
+    if args.quick:
+        spec = dataclasses.replace(spec, starts=1)
     check_writable(args.out, 'the result')
     if args.report:
         check_writable(args.report, 'the report')
@@ -403,8 +409,15 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
             result = fit(problem, mapper=dask_mapper(client))
     Path(args.out).write_text(yaml.safe_dump(result.as_mapping(), sort_keys=False),
                               encoding='utf-8')
-    for key, estimate, stderr in zip(result.keys, result.estimate, result.stderr):
-        err.write(f'{key} = {estimate:.6g} +- {stderr:.3g}\n')
+    for key, estimate, stderr, low, high in zip(result.keys, result.estimate, result.stderr,
+                                                result.low, result.high):
+        err.write(f'{key} = {estimate:.6g} +- {stderr:.3g}, 95 % [{low:.6g}, {high:.6g}]\n')
+    if result.fit_test is not None:
+        test = result.fit_test
+        err.write(f'test of fit: chi2 = {test.chi2:.4g} for {test.dof} degrees of freedom '
+                  f'(threshold {test.threshold:.4g}): {"passed" if test.passed else "FAILED"}; '
+                  f'{result.reached_best} of {len(result.start_costs)} starts reached the '
+                  'lowest cost\n')
     for warning in result.warnings:
         err.write(f'warning: {warning}\n')
     windows = (f' and {result.window_simulations} window simulations'

@@ -163,6 +163,13 @@ class FitProblem:
         with self._lock:
             self.simulations += simulations
 
+    def owners(self, values: np.ndarray) -> np.ndarray:
+        """Return the piece of each residual (m,) at ``values`` (exits: one simulation)."""
+        if self.spec.exits is not None:
+            self.count(1)
+            return exit_residuals(self.spec, self.scenario(values))[1]
+        return np.repeat(self.spec.tracks.particle, self._columns)
+
     def piece_rms(self, values: np.ndarray) -> dict[int, float]:
         """Return the root mean square residual of each piece (m; exits: in sigmas)."""
         exits = self.spec.exits

@@ -13,41 +13,59 @@
 # limitations under the License.
 
 """
-Bounded least squares of a fit, with standard errors, correlations and warnings.
+A fit: multistart least squares, a test of fit, profile-likelihood intervals, warnings.
 
-``scipy.optimize.least_squares`` (trust-region reflective, bounds, finite-difference
-Jacobian) searches θ: log p for a parameter whose range is positive, p otherwise. With
-``method: global``, ``scipy.optimize.differential_evolution`` first searches the whole box
-of bounds for the least sum of squares (seeded, a generation's simulations side by side),
-and least squares then starts from its best point: for multimodal cases, where a local
-search stops in the wrong valley. With ``segments``, a multiple-shooting fit
-(:mod:`shooting`) runs first, and least squares starts both from its estimate and from where
-it started; the lower cost wins. At the optimum, with J the Jacobian in θ and
-s² = |r|² / (m - n) the residual variance, the covariance of θ is s² (JᵀJ)⁻¹; the delta
-method carries it to p (dp/dθ = p in log scale). The 95 % interval is θ ± 1.96 σ_θ mapped
-back (so it stays positive in log scale).
+The search scale is θ: log p for a parameter whose range is positive, p otherwise.
 
-Parameters the data cannot identify are named in the warnings, never silently reported: a
-near-singular Jacobian (condition number above :data:`CONDITION_LIMIT`, naming the keys of
-the weakest direction), a correlation above :data:`CORRELATION_LIMIT` in magnitude, a
-standard error larger than the estimate, or a 95 % interval wider than
-:data:`INTERVAL_SHARE` of the key's free range (in θ: the data hardly narrow it).
+1. **Starts.** The file's start values and ``starts - 1`` seeded Latin-hypercube points of
+   the box (:mod:`multistart`; 8 starts by default, ``starts: 1`` or ``--quick`` for one).
+   With ``method: global``, differential evolution replaces the file's start by the best
+   point it finds; with ``segments``, a multiple-shooting fit (:mod:`shooting`) from that
+   start is one more start. Each start is a bounded least-squares fit (trust-region
+   reflective, forward-difference Jacobian); the starts run on processes (``processes``,
+   one per core by default; a Dask cluster's workers with ``--workers``/``--scheduler``),
+   a single start in this process with ``workers`` threads for its Jacobian's columns.
+   The lowest cost wins; the result says how many starts reached it (within Δχ² = 1).
+2. **Test of fit** (:mod:`goodness`): the residuals against the tracks' noise sigma
+   (``noise:``, or estimated from the tracks, :mod:`noise`), whole and piece by piece. A fit
+   that fails it has ``success: false`` and a warning naming the pieces.
+3. **Intervals** (:mod:`profile`): the 95 % profile-likelihood interval of every key, from
+   2 ΔC / sigma² = chi^2_1(0.95). A fit that failed its test has sigma² widened by its
+   reduced chi^2 (the misfit), and says so: such intervals are no confidence intervals.
+   A profile flat to a bound names the key as not identifiable that way.
+
+Standard errors and correlations come from s² (JᵀJ)⁻¹ at the optimum (s² = |r|² / (m - n),
+the delta method to p). Warnings also name keys where the Jacobian is near-singular
+(condition number above :data:`CONDITION_LIMIT`), two keys correlate above
+:data:`CORRELATION_LIMIT`, a standard error is not smaller than its estimate, or an interval
+covers more than :data:`INTERVAL_SHARE` of the key's free range (in θ).
 """
 
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+import contextlib
 from dataclasses import dataclass, field
+from functools import partial
 import math
+import multiprocessing
 import os
 from typing import Any
 
+import numba
 import numpy as np
 from scipy.optimize import differential_evolution, least_squares
 
-from .jacobian import forward_jacobian, forward_steps, Mapper
+from .goodness import FitTest, goodness_of_fit
+from .jacobian import forward_steps, Mapper
+from .multistart import (
+    DIFF_STEP, local_fit, LocalJob, LocalOutcome, same_minimum, start_points)
+from .noise import Noise, noise_of
 from .problem import FitProblem, Residuals, SumOfSquares
+from .profile import DELTA_CHI2, Profile, profile_side, ProfileJob, ProfileSide
 from .shooting import initial_starts, Shooting, split
 
-__all__ = ['CONDITION_LIMIT', 'CORRELATION_LIMIT', 'dask_mapper', 'fit', 'FitResult']
+__all__ = ['CONDITION_LIMIT', 'CORRELATION_LIMIT', 'dask_mapper', 'fit', 'FitResult',
+           'INTERVAL_SHARE']
 
 #: Above this condition number of the scaled Jacobian the fit warns of a near-singular one.
 CONDITION_LIMIT = 1.0e6
@@ -56,11 +74,8 @@ CORRELATION_LIMIT = 0.95
 #: A 95 % interval wider than this share of the free range (in θ) is reported: the data
 #: did not narrow the range fourfold.
 INTERVAL_SHARE = 0.25
-#: Relative finite-difference step in θ (the simulation's adaptive steps make smaller
-#: differences noisy).
-DIFF_STEP = 1.0e-3
-#: Seed of the extra starting points.
-STARTS_SEED = 0
+#: The first step of a profile where the Jacobian gives none (a share of the range in θ).
+PROFILE_STEP = 0.05
 
 
 @dataclass
@@ -70,7 +85,11 @@ class FitResult:
 
     cost: half the sum of squared residuals (m²) at the optimum; simulations: how many runs
     of the whole tracked time; window_simulations: how many runs of one window (multiple
-    shooting); piece_rms (m) per tracked piece; success and message from least_squares.
+    shooting); piece_rms (m) per tracked piece; success: least squares converged and the
+    fit passed its test; message: least_squares'. low, high: the profile-likelihood
+    interval (``interval`` names the method); profiles per key; start_costs: every start's
+    final cost, lowest first (the waterfall); reached_best: how many reached the lowest;
+    fit_test: the test of fit; flat: per key, (low side, high side) flat to the bound.
     """
 
     keys: tuple[str, ...]
@@ -86,18 +105,36 @@ class FitResult:
     warnings: list[str] = field(default_factory=list)
     success: bool = True
     message: str = ''
+    interval: str = ''
+    profiles: dict[str, dict[str, list[float]]] = field(default_factory=dict)
+    flat: dict[str, tuple[bool, bool]] = field(default_factory=dict)
+    start_costs: list[float] = field(default_factory=list)
+    reached_best: int = 1
+    fit_test: FitTest | None = None
 
     def as_mapping(self) -> dict[str, Any]:
         """Return the result as RESULT.yaml holds it (plain numbers)."""
+        parameters = {}
+        for k, e, s, lo, hi in zip(self.keys, self.estimate, self.stderr, self.low,
+                                   self.high):
+            entry: dict[str, Any] = {'estimate': float(e), 'stderr': float(s),
+                                     'low': float(lo), 'high': float(hi)}
+            if k in self.flat:
+                entry['identifiable'] = {'low': not self.flat[k][0],
+                                         'high': not self.flat[k][1]}
+            if k in self.profiles:
+                entry['profile'] = self.profiles[k]
+            parameters[k] = entry
         return {
-            'parameters': {k: {'estimate': float(e), 'stderr': float(s), 'low': float(lo),
-                               'high': float(hi)}
-                           for k, e, s, lo, hi in zip(self.keys, self.estimate, self.stderr,
-                                                      self.low, self.high)},
+            'parameters': parameters,
+            'interval': self.interval,
             'correlation': {a: {b: float(self.correlation[i, j])
                                 for j, b in enumerate(self.keys)}
                             for i, a in enumerate(self.keys)},
             'cost': float(self.cost),
+            'test_of_fit': self.fit_test.as_mapping() if self.fit_test else None,
+            'starts': {'count': len(self.start_costs), 'reached_best': int(self.reached_best),
+                       'costs': [float(c) for c in self.start_costs]},
             'simulations': int(self.simulations),
             'window_simulations': int(self.window_simulations),
             'piece_rms': {int(p): float(v) for p, v in self.piece_rms.items()},
@@ -111,9 +148,10 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
     """
     Fit the problem's free keys; see the module documentation.
 
-    mapper: runs a batch of simulations (a global search's generation, the Jacobian's
-    columns, multiple shooting's windows), for example a Dask client's (:func:`dask_mapper`);
-    by default ``spec.workers`` threads.
+    mapper: runs a batch of jobs, for example a Dask client's (:func:`dask_mapper`): the
+    starts and the profiles' sides, and a global search's generations and multiple
+    shooting's windows. By default the starts and the profiles run on ``spec.processes``
+    processes, and a single start's Jacobian columns on ``spec.workers`` threads.
     """
     spec = problem.spec
     bounds = np.array(spec.bounds)
@@ -127,7 +165,7 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
         return np.where(logs, np.log(np.where(logs, p, 1.0)), p)
 
     workers = spec.workers or os.cpu_count() or 1
-    with ThreadPoolExecutor(workers) as pool:
+    with ThreadPoolExecutor(workers) as pool, _jobs(mapper, spec.processes) as run:
         batch = mapper or (pool.map if workers > 1 else map)
 
         def counted(function: Any, items: Any) -> list[Any]:
@@ -135,34 +173,161 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
             problem.count(len(items))
             return list(batch(function, items))
 
-        starts = [np.clip(theta_of(np.array(spec.start)), lb, ub)]
+        first = np.clip(theta_of(np.array(spec.start)), lb, ub)
         if spec.method == 'global':
-            starts = [_global_search(problem, task, lb, ub, counted)]
+            first = _global_search(problem, task, lb, ub, counted)
+        starts = [first]
         if spec.segments is not None:  # its estimate, and where it started: the best wins
-            starts.insert(0, _multiple_shooting(problem, task.values, starts[0], lb, ub, batch))
-        rng = np.random.default_rng(STARTS_SEED)
-        starts += [rng.uniform(lb, ub) for _ in range(spec.starts - 1)]
-        last: dict[bytes, np.ndarray] = {}
+            starts.insert(0, _multiple_shooting(problem, task.values, first, lb, ub, batch))
+        starts += start_points(spec.starts - 1, lb, ub)
+        jobs = [LocalJob(task, theta0, lb, ub, spec.loss) for theta0 in starts]
+        if len(jobs) == 1:
+            outcomes = [local_fit(jobs[0], batch)]
+        else:
+            outcomes = run(local_fit, jobs)
+        problem.count(sum(o.simulations for o in outcomes))
+        best = min(outcomes, key=lambda o: o.cost)
+        noise = (noise_of(spec.noise, spec.tracks) if spec.exits is None
+                 else Noise(sigma=1.0, source='exit_sigma'))
+        estimate = task.values(best.x)
+        result = _statistics(problem, best, estimate, logs)
+        result.start_costs = sorted(o.cost for o in outcomes)
+        result.reached_best = int(same_minimum(np.array(result.start_costs),
+                                               noise.sigma).sum())
+        test = goodness_of_fit(best.fun, problem.owners(estimate), noise, len(spec.keys))
+        result.fit_test = test
+        widen = max(1.0, test.reduced) if not test.passed else 1.0
+        sides = run(profile_side, _profile_jobs(task, best, lb, ub,
+                                                noise.sigma ** 2 * widen))
+        problem.count(sum(side.simulations for side in sides))
+    result.simulations = problem.simulations
+    _intervals(result, spec.keys, logs, lb, ub, sides, noise, widen)
+    _test_warnings(result, test, noise, widen)
+    if len(outcomes) > 1 and result.reached_best == 1:
+        result.warnings.append(f'only 1 of {len(outcomes)} starts reached the lowest cost: '
+                               'the minimum may have a narrow basin; more starts would tell')
+    return result
 
-        def residuals(theta: np.ndarray) -> np.ndarray:
-            key = theta.tobytes()
-            if key not in last:
-                last.clear()
-                last[key] = problem.residuals(task.values(theta))
-            return last[key]
 
-        def jacobian(theta: np.ndarray) -> np.ndarray:
-            steps = forward_steps(theta, DIFF_STEP, lb, ub)
-            return forward_jacobian(task, theta, residuals(theta), steps, counted)
+@contextlib.contextmanager
+def _jobs(mapper: Mapper | None, processes: int) -> Iterator[Callable[..., list[Any]]]:
+    """
+    Yield ``run(function, jobs)``: on the mapper, on a process pool, or here.
 
-        best = None
-        for theta0 in starts:
-            result = least_squares(residuals, theta0, jac=jacobian, bounds=(lb, ub),
-                                   loss=spec.loss, x_scale='jac')
-            if best is None or result.cost < best.cost:
-                best = result
-    assert best is not None
-    return _statistics(problem, best, task.values(best.x), logs)
+    The pool (spawned processes: numba's threads do not survive a fork) starts at the first
+    batch of more than one job and serves every batch after it.
+    """
+    executor: list[ProcessPoolExecutor] = []
+    count = processes or os.cpu_count() or 1
+
+    def run(function: Callable[[Any], Any], jobs: Iterable[Any]) -> list[Any]:
+        jobs = list(jobs)
+        if mapper is not None:
+            return list(mapper(function, jobs))
+        if count <= 1 or len(jobs) <= 1:
+            return [function(job) for job in jobs]
+        if not executor:
+            executor.append(ProcessPoolExecutor(
+                count, mp_context=multiprocessing.get_context('spawn'),
+                initializer=_one_thread))
+        return list(executor[0].map(function, jobs))
+
+    try:
+        yield run
+    finally:
+        for pool in executor:
+            pool.shutdown()
+
+
+def _one_thread() -> None:
+    """Run a pool process's kernels on one thread: the processes share the cores."""
+    numba.set_num_threads(1)
+
+
+def _profile_jobs(task: Residuals, best: LocalOutcome, lb: np.ndarray, ub: np.ndarray,
+                  variance: float) -> list[ProfileJob]:
+    """Return the two sides of every key's profile at the optimum, for noise ``variance``."""
+    unit = _unit_covariance(best.jac)[0]
+    n = len(best.x)
+    span = ub - lb
+    cost = 0.5 * float(best.fun @ best.fun)
+    jobs = []
+    for k in range(n):
+        step = 1.96 * math.sqrt(variance * unit[k, k]) if unit[k, k] > 0.0 else math.nan
+        if not math.isfinite(step) or step <= 0.0 or step > 0.5 * span[k]:
+            step = PROFILE_STEP * span[k]
+        step = max(step, 1.0e-6 * span[k])
+        slope = unit[:, k] / unit[k, k] if unit[k, k] > 0.0 else np.zeros(n)
+        for direction in (-1, 1):
+            jobs.append(ProfileJob(task=task, theta=best.x, cost=cost, lb=lb, ub=ub, key=k,
+                                   direction=direction, step0=step,
+                                   threshold=0.5 * DELTA_CHI2 * variance,
+                                   slope=np.nan_to_num(slope)))
+    return jobs
+
+
+def _intervals(result: FitResult, keys: tuple[str, ...], logs: np.ndarray, lb: np.ndarray,
+               ub: np.ndarray, sides: list[ProfileSide], noise: Noise, widen: float) -> None:
+    """Put the profiles' intervals, points and flat sides into ``result``; warn."""
+    for k, key in enumerate(keys):
+        value = partial(_value_of, bool(logs[k]))
+        down, up = sides[2 * k], sides[2 * k + 1]
+        theta_k = float(np.log(result.estimate[k]) if logs[k] else result.estimate[k])
+        profile = Profile.of(theta_k, down, up)
+        result.low[k] = float(value(profile.low))
+        result.high[k] = float(value(profile.high))
+        variance = noise.sigma ** 2 * widen
+        result.profiles[key] = {'values': [float(v) for v in value(profile.thetas)],
+                                'delta_chi2': [float(2.0 * d / variance)
+                                               for d in profile.deltas]}
+        result.flat[key] = (profile.flat_low, profile.flat_high)
+        for side, name, bound in ((down, 'lower', lb[k]), (up, 'upper', ub[k])):
+            if side.flat:
+                result.warnings.append(
+                    f'{key}: its profile stays below the 95 % threshold up to the {name} '
+                    f'bound {float(value(bound)):.4g}: not identifiable that way')
+        lowest = min(down.lower, up.lower)
+        if 2.0 * lowest / variance < -1.0:
+            result.success = False
+            result.warnings.append(
+                f"{key}: its profile found a cost lower than the optimum's (Δχ² = "
+                f'{2.0 * lowest / variance:.3g}): the fit did not reach the minimum; try '
+                'more starts')
+        if (not profile.flat_low and not profile.flat_high
+                and profile.high - profile.low > INTERVAL_SHARE * (ub[k] - lb[k])):
+            result.warnings.append(
+                f'{key}: the 95 % interval [{result.low[k]:.4g}, {result.high[k]:.4g}] covers '
+                f'more than {INTERVAL_SHARE:.0%} of the free range: poorly identified')
+    source = {'noise': 'given (noise:)', 'tracks': 'estimated from the tracks',
+              'exit_sigma': 'exit_sigma'}[noise.source]
+    result.interval = (f'profile likelihood, 95 % (Δχ² = {DELTA_CHI2:.2f}), noise sigma '
+                       f'{noise.sigma:.4g} {source}')
+    if widen > 1.0:
+        result.interval += (f', widened by the misfit (sigma² × {widen:.3g}): the fit failed '
+                            'its test, so these are no confidence intervals')
+
+
+def _value_of(log: bool, theta: Any) -> Any:
+    """Return the value of θ (exp θ in log scale)."""
+    return np.exp(theta) if log else np.asarray(theta, dtype=float)
+
+
+def _test_warnings(result: FitResult, test: FitTest, noise: Noise, widen: float) -> None:
+    """Fail the result and say why where the fit failed its test."""
+    if test.passed:
+        return
+    result.success = False
+    unit = 'mm' if noise.source != 'exit_sigma' else 'sigma'
+    size = noise.sigma * (1e3 if unit == 'mm' else 1.0)
+    pieces = ', '.join(f'{p} (rms {test.pieces[p][0]:.3g} sigma)' for p in test.failing)
+    where = f'; pieces that do not fit: {pieces}' if pieces else ''
+    result.warnings.insert(0, (
+        f'the fit fails its test: chi2 = {test.chi2:.4g} for {test.dof} degrees of freedom '
+        f'(threshold {test.threshold:.4g}) with noise sigma = {size:.3g} {unit} '
+        f'({noise.source}){where}. Try: more starts or segments (a local minimum); the '
+        'scenario against the experiment, e.g. its rotation history and start places (a '
+        'model error); noise: (a wrong noise level). The intervals are widened by the misfit '
+        f'(sigma² × {widen:.3g}) and are no confidence intervals.'))
 
 
 def dask_mapper(client: Any) -> Mapper:
@@ -204,24 +369,31 @@ def _global_search(problem: FitProblem, task: Residuals, lb: np.ndarray, ub: np.
     return np.asarray(result.x)
 
 
-def _statistics(problem: FitProblem, result: Any, estimate: np.ndarray,
-                logs: np.ndarray) -> FitResult:
-    keys = problem.spec.keys
-    bounds = np.array(problem.spec.bounds)
-    column = logs[:, None]
-    span = np.ptp(np.where(column, np.log(np.where(column, bounds, 1.0)), bounds), axis=1)
-    jac = np.asarray(result.jac, dtype=float)
-    residuals = np.asarray(result.fun, dtype=float)
-    m, n = jac.shape
-    s2 = float(residuals @ residuals) / max(m - n, 1)
+def _unit_covariance(jac: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """
+    Return (JᵀJ)⁻¹ (n, n) in θ, the scaled Jacobian's condition number, V and singular values.
+
+    Columns are scaled to unit norm first; directions with a singular value below 1e-12 of
+    the largest get no variance (the warnings name them).
+    """
+    jac = np.asarray(jac, dtype=float)
     scale = np.linalg.norm(jac, axis=0)
     scale[scale == 0.0] = 1.0
-    scaled = jac / scale
-    u, sv, vt = np.linalg.svd(scaled, full_matrices=False)
+    _, sv, vt = np.linalg.svd(jac / scale, full_matrices=False)
     condition = float(sv[0] / sv[-1]) if sv[-1] > 0.0 else math.inf
     inverse = np.where(sv > sv[0] * 1e-12, 1.0 / np.where(sv > 0, sv, 1.0) ** 2, 0.0)
-    cov_theta = (vt.T * inverse) @ vt / np.outer(scale, scale) * s2
-    sigma_theta = np.sqrt(np.maximum(np.diag(cov_theta), 0.0))
+    return (vt.T * inverse) @ vt / np.outer(scale, scale), condition, vt, sv
+
+
+def _statistics(problem: FitProblem, result: LocalOutcome, estimate: np.ndarray,
+                logs: np.ndarray) -> FitResult:
+    """Return the fit at ``result`` with standard errors, correlations and their warnings."""
+    keys = problem.spec.keys
+    residuals = np.asarray(result.fun, dtype=float)
+    m, n = np.asarray(result.jac).shape
+    s2 = float(residuals @ residuals) / max(m - n, 1)
+    unit, condition, vt, sv = _unit_covariance(result.jac)
+    cov_theta = unit * s2
     gradient = np.where(logs, estimate, 1.0)
     cov = cov_theta * np.outer(gradient, gradient)
     stderr = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -229,10 +401,6 @@ def _statistics(problem: FitProblem, result: Any, estimate: np.ndarray,
         correlation = cov / np.outer(stderr, stderr)
     correlation = np.nan_to_num(correlation)
     np.fill_diagonal(correlation, 1.0)
-    theta = np.where(logs, np.log(np.where(logs, estimate, 1.0)), estimate)
-    with np.errstate(over='ignore'):  # an unidentified key's interval may reach infinity
-        low = np.where(logs, np.exp(theta - 1.96 * sigma_theta), estimate - 1.96 * stderr)
-        high = np.where(logs, np.exp(theta + 1.96 * sigma_theta), estimate + 1.96 * stderr)
     warnings = []
     if condition > CONDITION_LIMIT or not np.all(np.isfinite(stderr)) or sv[-1] == 0.0:
         weak = [keys[i] for i in np.flatnonzero(np.abs(vt[-1]) > 0.3)]
@@ -247,12 +415,8 @@ def _statistics(problem: FitProblem, result: Any, estimate: np.ndarray,
         if not stderr[i] < abs(estimate[i]):
             warnings.append(f'{keys[i]}: standard error {stderr[i]:.3g} is not smaller than '
                             f'the estimate {estimate[i]:.3g}: not identified')
-        elif 2.0 * 1.96 * sigma_theta[i] > INTERVAL_SHARE * span[i]:
-            warnings.append(f'{keys[i]}: the 95 % interval [{low[i]:.3g}, {high[i]:.3g}] '
-                            f'covers more than {INTERVAL_SHARE:.0%} of the free range '
-                            f'[{bounds[i, 0]:g}, {bounds[i, 1]:g}]: poorly identified')
-    return FitResult(keys=keys, estimate=estimate, stderr=stderr, low=low, high=high,
-                     correlation=correlation, cost=float(result.cost),
+    return FitResult(keys=keys, estimate=estimate, stderr=stderr, low=np.array(estimate),
+                     high=np.array(estimate), correlation=correlation, cost=float(result.cost),
                      simulations=problem.simulations, piece_rms=problem.piece_rms(estimate),
                      window_simulations=problem.window_simulations,
                      warnings=warnings, success=bool(result.success),

@@ -29,7 +29,9 @@ A fit file is a YAML mapping::
     exit_sigma: {angle_deg: 1.0, t: 0.02}   # exits: the uncertainty of an angle and a time
     segments: 0.5            # optional: multiple shooting over windows of 0.5 s first
     loss: linear             # or soft_l1, huber, cauchy, arctan (scipy's robust losses)
-    starts: 1                # > 1: also from starts - 1 points drawn in the bounds (seeded)
+    starts: 8                # the start values and starts - 1 seeded points in the bounds
+    noise: 0.001             # optional: the tracks' noise sigma (m); estimated if absent
+    processes: 0             # processes that run the starts and profiles (0: one per core)
     method: local            # or global: differential evolution over the bounds, then local
     global: {popsize: 8, maxiter: 15, seed: 0}   # the differential evolution (method: global)
     workers: 1               # threads that run a fit's simulations side by side (0: cores)
@@ -61,7 +63,9 @@ from ..physics.simulation import cone_surface_height
 __all__ = ['FitSpec', 'fit_from_mapping', 'load_fit', 'LOSSES', 'RESIDUALS']
 
 FIT_KEYS = ('scenario', 'tracks', 'tracks_every', 'free', 'residual', 'exit_sigma', 'segments',
-            'loss', 'starts', 'method', 'global', 'workers')
+            'loss', 'starts', 'method', 'global', 'workers', 'noise', 'processes')
+#: Starts of a fit by default (multistart: doc/fit.md measured what one start misses).
+DEFAULT_STARTS = 8
 #: The searches: least squares from the start values, or differential evolution first.
 METHODS = ('local', 'global')
 #: The keys of ``global:`` and their defaults.
@@ -85,7 +89,8 @@ class FitSpec:
 
     keys: the free dotted keys; bounds (low, high) and start value of each; residual,
     segments (s, or None: single shooting only), loss, starts, method, global_options
-    (popsize, maxiter, seed), workers as in the file. With ``residual: exits``, exits holds
+    (popsize, maxiter, seed), workers, processes as in the file; noise (m, or None:
+    estimated from the tracks). With ``residual: exits``, exits holds
     the observed exits, exit_sigma their uncertainty (deg, s), and tracks is empty.
     """
 
@@ -100,10 +105,12 @@ class FitSpec:
     exit_sigma: tuple[float, float] = (1.0, 0.02)
     segments: float | None = None
     loss: str = 'linear'
-    starts: int = 1
+    starts: int = DEFAULT_STARTS
     method: str = 'local'
     global_options: tuple[tuple[str, int], ...] = tuple(GLOBAL_DEFAULTS.items())
     workers: int = 1
+    noise: float | None = None
+    processes: int = 0
 
     def scenario_mapping(self, values: Any) -> dict[str, Any]:
         """Return the scenario mapping with the free keys set to ``values``."""
@@ -236,7 +243,7 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     loss = content.get('loss', 'linear')
     if loss not in LOSSES:
         raise ScenarioError(f'loss must be one of {", ".join(LOSSES)}, got {loss!r}')
-    starts = content.get('starts', 1)
+    starts = content.get('starts', DEFAULT_STARTS)
     if isinstance(starts, bool) or not isinstance(starts, int) or not 1 <= starts <= 100:
         raise ScenarioError(f'starts must be an integer in [1, 100], got {starts!r}')
     method = content.get('method', 'local')
@@ -252,12 +259,24 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
         raise ScenarioError(f'workers must be 0 (one per core) or a positive integer, got '
                             f'{workers!r}')
+    noise = content.get('noise')
+    if noise is not None and residual == 'exits':
+        raise ScenarioError("noise is the tracks' noise (residual: trajectory); exits have "
+                            'exit_sigma')
+    if noise is not None and (isinstance(noise, bool) or not isinstance(noise, (int, float))
+                              or not 0.0 < noise < math.inf):
+        raise ScenarioError(f'noise must be a positive number (m), got {noise!r}')
+    processes = content.get('processes', 0)
+    if isinstance(processes, bool) or not isinstance(processes, int) or processes < 0:
+        raise ScenarioError(f'processes must be 0 (one per core) or a positive integer, got '
+                            f'{processes!r}')
     return FitSpec(mapping=mapping, base_dir=scenario_dir, tracks=tracks, keys=tuple(keys),
                    bounds=tuple(bounds), start=tuple(start), residual=residual, exits=exits,
                    exit_sigma=(float(sigma['angle_deg']), float(sigma['t'])),
                    segments=segments, loss=loss,
                    starts=starts, method=method, global_options=tuple(merged.items()),
-                   workers=workers)
+                   workers=workers, noise=None if noise is None else float(noise),
+                   processes=processes)
 
 
 def _check_pieces(particle: np.ndarray, pieces: int) -> None:
