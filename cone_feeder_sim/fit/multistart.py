@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.stats import qmc
+from scipy.stats import chi2, qmc
 
 from .jacobian import forward_jacobian, forward_steps, Mapper
 from .problem import Residuals
@@ -113,11 +113,14 @@ def local_fit(job: LocalJob, mapper: Mapper = map) -> LocalOutcome:
                         message=str(result.message))
 
 
-def same_minimum(costs: np.ndarray, sigma: float) -> np.ndarray:
+def same_minimum(costs: np.ndarray, sigma: float, free: int) -> np.ndarray:
     """
-    Return which costs (½ Σ r²) reached the lowest: within ½ sigma² of it (Δχ² ≤ 1).
+    Return which costs (½ Σ r²) reached the lowest: inside its joint 95 % confidence region.
 
-    sigma: the noise of one residual (the residuals' unit).
+    That is 2 (cost - lowest) / sigma² ≤ chi^2 with ``free`` degrees of freedom at 0.95:
+    starts that stopped there are indistinguishable from the best with these data (the
+    simulator's adaptive steps leave the cost slightly rough, so starts that converge to
+    one minimum stop a few units of χ² apart). sigma: the noise of one residual.
     """
     costs = np.asarray(costs, dtype=float)
-    return costs - costs.min() <= 0.5 * sigma * sigma
+    return 2.0 * (costs - costs.min()) / (sigma * sigma) <= chi2.ppf(0.95, free)

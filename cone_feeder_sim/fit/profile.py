@@ -27,7 +27,10 @@ One side of one key is one :class:`ProfileJob` (picklable: a process pool or a D
 runs it). It walks out from the optimum: the first point at the Jacobian's 1.96 σ_θ (where a
 quadratic profile crosses), the next ones where the square root of the profile, which is
 linear in θ_k for a quadratic cost, extrapolates to the threshold (at most fourfold farther);
-then the crossing is bracketed and refined by regula falsi on that square root. The other
+then the crossing is bracketed and refined by regula falsi on that square root, each point
+cutting at least a tenth off the bracket (a cliff, where a piece starts to slide or leaves
+elsewhere, bends the square root), until it is 5 % of the distance wide. A point within
+25 % of the threshold ends the walk (the end found by the square root through it). The other
 keys start from the previous point's optimum moved along the Jacobian's correlation.
 """
 
@@ -49,10 +52,15 @@ DELTA_CHI2 = float(chi2.ppf(0.95, 1))
 MAX_POINTS = 8
 #: The crossing is refined until the bracket is this narrow relative to its distance.
 BRACKET = 0.05
-#: A point whose ΔC is this close to the threshold (relative) is the interval's end.
-CLOSE = 0.05
+#: A point whose ΔC is this close to the threshold (relative) ends the walk: the end is
+#: where √ΔC, taken as linear from the optimum through it, reaches the threshold (a few
+#: per cent of the half width at most, for a profile that is quadratic to 25 % in ΔC).
+CLOSE = 0.25
+#: The inner fits' tolerance on the cost (relative): 1e-6 of a cost of m sigma² / 2 is far
+#: below the threshold's 1.92 sigma².
+INNER_FTOL = 1.0e-6
 #: Refinements of the crossing at most.
-MAX_REFINE = 2
+MAX_REFINE = 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,7 +149,8 @@ def profile_side(job: ProfileJob) -> ProfileSide:
 
             result = least_squares(inner, theta[others], bounds=(job.lb[others],
                                                                  job.ub[others]),
-                                   diff_step=DIFF_STEP, x_scale='jac')
+                                   diff_step=DIFF_STEP, x_scale='jac', ftol=INNER_FTOL,
+                                   xtol=INNER_FTOL)
             theta[others] = result.x
             cost = float(result.cost)
         else:
@@ -162,7 +171,8 @@ def profile_side(job: ProfileJob) -> ProfileSide:
         distances.append(trial)
         deltas.append(delta)
         if abs(delta - job.threshold) <= CLOSE * job.threshold:
-            return _side(job, distances, deltas, job.theta[k] + sign * trial, False, runs[0])
+            end = trial * root / math.sqrt(delta)
+            return _side(job, distances, deltas, job.theta[k] + sign * end, False, runs[0])
         if delta >= job.threshold:
             above = (trial, math.sqrt(delta))
             break
@@ -175,13 +185,17 @@ def profile_side(job: ProfileJob) -> ProfileSide:
         return _side(job, distances, deltas, job.ub[k] if sign > 0 else job.lb[k], True,
                      runs[0])
     for _ in range(MAX_REFINE):
-        cross = below[0] + (root - below[1]) * (above[0] - below[0]) / (above[1] - below[1])
-        if above[0] - below[0] <= BRACKET * cross:
+        width = above[0] - below[0]
+        cross = below[0] + (root - below[1]) * width / (above[1] - below[1])
+        if width <= BRACKET * cross:
             break
+        # a cliff (a piece that starts to slide, or leaves elsewhere) bends the square root:
+        # each point cuts at least a tenth off the bracket
+        cross = min(max(cross, below[0] + 0.1 * width), above[0] - 0.1 * width)
         delta = delta_at(cross)
         distances.append(cross)
         deltas.append(delta)
-        if abs(delta - job.threshold) <= CLOSE * job.threshold:
+        if abs(delta - job.threshold) <= BRACKET * job.threshold:
             return _side(job, distances, deltas, job.theta[k] + sign * cross, False, runs[0])
         if delta >= job.threshold:
             above = (cross, math.sqrt(delta))

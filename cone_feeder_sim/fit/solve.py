@@ -25,7 +25,8 @@ The search scale is θ: log p for a parameter whose range is positive, p otherwi
    reflective, forward-difference Jacobian); the starts run on processes (``processes``,
    one per core by default; a Dask cluster's workers with ``--workers``/``--scheduler``),
    a single start in this process with ``workers`` threads for its Jacobian's columns.
-   The lowest cost wins; the result says how many starts reached it (within Δχ² = 1).
+   The lowest cost wins; the result says how many starts reached it (inside its joint 95 %
+   confidence region).
 2. **Test of fit** (:mod:`goodness`): the residuals against the tracks' noise sigma
    (``noise:``, or estimated from the tracks, :mod:`noise`), whole and piece by piece. A fit
    that fails it has ``success: false`` and a warning naming the pieces.
@@ -192,8 +193,8 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
         estimate = task.values(best.x)
         result = _statistics(problem, best, estimate, logs)
         result.start_costs = sorted(o.cost for o in outcomes)
-        result.reached_best = int(same_minimum(np.array(result.start_costs),
-                                               noise.sigma).sum())
+        result.reached_best = int(same_minimum(np.array(result.start_costs), noise.sigma,
+                                               len(spec.keys)).sum())
         test = goodness_of_fit(best.fun, problem.owners(estimate), noise, len(spec.keys))
         result.fit_test = test
         widen = max(1.0, test.reduced) if not test.passed else 1.0

@@ -15,6 +15,7 @@
 """Tests of the fit room: synthetic truth recovered, weak parameters flagged, bad input named."""
 
 import csv
+from dataclasses import replace
 from pathlib import Path
 
 from cone_feeder_sim.cli import main
@@ -67,10 +68,11 @@ def test_a_synthetic_truth_is_recovered_within_two_standard_errors(tmp_path: Pat
     write_tracks(tmp_path / 'tracks.csv', truth, 30.0, 0.001, 0)
     spec = fit_from_mapping({'scenario': BASE, 'tracks': 'tracks.csv', 'free': FREE}, tmp_path)
     assert spec.start == (225.0, 0.85)  # the parameter file's values
-    result = fit(FitProblem(spec))
+    assert (spec.starts, spec.processes, spec.noise) == (8, 0, None)  # the defaults
+    result = fit(FitProblem(replace(spec, starts=4)))
     assert result.success and result.warnings == []
-    # the defaults: 8 starts on processes, and most reached the lowest cost
-    assert len(result.start_costs) == 8 and result.reached_best >= 4
+    # starts on processes, and most reached the lowest cost
+    assert len(result.start_costs) == 4 and result.reached_best >= 3
     assert result.fit_test is not None and result.fit_test.passed
     for key, value, estimate, stderr, low, high in zip(
             result.keys, (315.0, 0.7225), result.estimate, result.stderr, result.low,
@@ -195,7 +197,7 @@ def test_the_95_percent_intervals_cover_the_truth_over_20_seeds(tmp_path: Path) 
         write_tracks(folder / 'tracks.csv', truth, 30.0, 0.001, 100 + seed)
         result = fit(FitProblem(fit_from_mapping(
             {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'starts': 1,
-             'processes': 1}, folder)))
+             'processes': 1, 'noise': 0.001}, folder)))
         assert result.success and result.interval.startswith('profile likelihood')
         covered += (result.low < truth_values) & (truth_values < result.high)
     assert all(18 <= c <= 20 for c in covered), covered
@@ -297,7 +299,7 @@ def test_a_wrong_model_fails_the_test_of_fit_and_names_the_pieces(tmp_path: Path
     write_tracks(tmp_path / 'tracks.csv', set_scenario_key(earlier, 'model.d', 315.0), 30.0,
                  0.001, 4, lose_exits=True)
     result = fit(FitProblem(fit_from_mapping(
-        {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'starts': 2,
+        {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'starts': 1,
          'processes': 1}, tmp_path)))
     assert not result.success
     test = result.fit_test
