@@ -31,8 +31,8 @@ The search scale is θ: log p for a parameter whose range is positive, p otherwi
    (``noise:``, or estimated from the tracks, :mod:`noise`), whole and piece by piece. A fit
    that fails it has ``success: false`` and a warning naming the pieces.
 3. **Intervals** (:mod:`profile`): the 95 % profile-likelihood interval of every key, from
-   2 ΔC / sigma² = chi^2_1(0.95). A fit that failed its test has sigma² widened by its
-   reduced chi^2 (the misfit), and says so: such intervals are no confidence intervals.
+   2 ΔC / sigma² = chi^2_1(0.95). A fit that failed its test gets no intervals: its low
+   and high are the free range, and ``interval`` says so.
    A profile flat to a bound names the key as not identifiable that way.
 
 Standard errors and correlations come from s² (JᵀJ)⁻¹ at the optimum (s² = |r|² / (m - n),
@@ -197,13 +197,18 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
                                                len(spec.keys)).sum())
         test = goodness_of_fit(best.fun, problem.owners(estimate), noise, len(spec.keys))
         result.fit_test = test
-        widen = max(1.0, test.reduced) if not test.passed else 1.0
-        sides = run(profile_side, _profile_jobs(task, best, lb, ub,
-                                                noise.sigma ** 2 * widen))
-        problem.count(sum(side.simulations for side in sides))
+        sides = []
+        if test.passed:
+            sides = run(profile_side, _profile_jobs(task, best, lb, ub, noise.sigma ** 2))
+            problem.count(sum(side.simulations for side in sides))
     result.simulations = problem.simulations
-    _intervals(result, spec.keys, logs, lb, ub, sides, noise, widen)
-    _test_warnings(result, test, noise, widen)
+    if test.passed:
+        _intervals(result, spec.keys, logs, lb, ub, sides, noise)
+    else:
+        result.low, result.high = bounds[:, 0].copy(), bounds[:, 1].copy()
+        result.interval = ('not estimated: the fit failed its test (low and high are the '
+                           'free range)')
+    _test_warnings(result, test, noise)
     if len(outcomes) > 1 and result.reached_best == 1:
         result.warnings.append(f'only 1 of {len(outcomes)} starts reached the lowest cost: '
                                'the minimum may have a narrow basin; more starts would tell')
@@ -268,7 +273,7 @@ def _profile_jobs(task: Residuals, best: LocalOutcome, lb: np.ndarray, ub: np.nd
 
 
 def _intervals(result: FitResult, keys: tuple[str, ...], logs: np.ndarray, lb: np.ndarray,
-               ub: np.ndarray, sides: list[ProfileSide], noise: Noise, widen: float) -> None:
+               ub: np.ndarray, sides: list[ProfileSide], noise: Noise) -> None:
     """Put the profiles' intervals, points and flat sides into ``result``; warn."""
     for k, key in enumerate(keys):
         value = partial(_value_of, bool(logs[k]))
@@ -277,7 +282,7 @@ def _intervals(result: FitResult, keys: tuple[str, ...], logs: np.ndarray, lb: n
         profile = Profile.of(theta_k, down, up)
         result.low[k] = float(value(profile.low))
         result.high[k] = float(value(profile.high))
-        variance = noise.sigma ** 2 * widen
+        variance = noise.sigma ** 2
         result.profiles[key] = {'values': [float(v) for v in value(profile.thetas)],
                                 'delta_chi2': [float(2.0 * d / variance)
                                                for d in profile.deltas]}
@@ -303,9 +308,6 @@ def _intervals(result: FitResult, keys: tuple[str, ...], logs: np.ndarray, lb: n
               'exit_sigma': 'exit_sigma'}[noise.source]
     result.interval = (f'profile likelihood, 95 % (Δχ² = {DELTA_CHI2:.2f}), noise sigma '
                        f'{noise.sigma:.4g} {source}')
-    if widen > 1.0:
-        result.interval += (f', widened by the misfit (sigma² × {widen:.3g}): the fit failed '
-                            'its test, so these are no confidence intervals')
 
 
 def _value_of(log: bool, theta: Any) -> Any:
@@ -313,7 +315,7 @@ def _value_of(log: bool, theta: Any) -> Any:
     return np.exp(theta) if log else np.asarray(theta, dtype=float)
 
 
-def _test_warnings(result: FitResult, test: FitTest, noise: Noise, widen: float) -> None:
+def _test_warnings(result: FitResult, test: FitTest, noise: Noise) -> None:
     """Fail the result and say why where the fit failed its test."""
     if test.passed:
         return
@@ -327,8 +329,8 @@ def _test_warnings(result: FitResult, test: FitTest, noise: Noise, widen: float)
         f'(threshold {test.threshold:.4g}) with noise sigma = {size:.3g} {unit} '
         f'({noise.source}){where}. Try: more starts or segments (a local minimum); the '
         'scenario against the experiment, e.g. its rotation history and start places (a '
-        'model error); noise: (a wrong noise level). The intervals are widened by the misfit '
-        f'(sigma² × {widen:.3g}) and are no confidence intervals.'))
+        'model error); noise: (a wrong noise level). No intervals are given (low and high are '
+        'the free range).'))
 
 
 def dask_mapper(client: Any) -> Mapper:
