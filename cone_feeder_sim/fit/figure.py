@@ -32,7 +32,7 @@ import numpy as np
 
 from .exits import simulate_exits
 from .problem import FitProblem, predict
-from .profile import DELTA_CHI2
+from .profiles import DELTA_CHI2
 from .solve import FitResult
 from ..errors import ReportError
 

@@ -74,7 +74,7 @@ class FitTest:
 
 
 def goodness_of_fit(residuals: np.ndarray, owner: np.ndarray, noise: Noise,
-                free: int) -> FitTest:
+                    free: int) -> FitTest:
     """
     Return the test of fit of ``residuals`` (m,) whose pieces are ``owner`` (m,) ids.
 

@@ -30,7 +30,7 @@ The search scale is θ: log p for a parameter whose range is positive, p otherwi
 2. **Test of fit** (:mod:`goodness`): the residuals against the tracks' noise sigma
    (``noise:``, or estimated from the tracks, :mod:`noise`), whole and piece by piece. A fit
    that fails it has ``success: false`` and a warning naming the pieces.
-3. **Intervals** (:mod:`profile`): the 95 % profile-likelihood interval of every key, from
+3. **Intervals** (:mod:`profiles`): the 95 % profile-likelihood interval of every key, from
    2 ΔC / sigma² = chi^2_1(0.95). A fit that failed its test gets no intervals: its low
    and high are the free range, and ``interval`` says so.
    A profile flat to a bound names the key as not identifiable that way.
@@ -62,7 +62,7 @@ from .multistart import (
     DIFF_STEP, local_fit, LocalJob, LocalOutcome, same_minimum, start_points)
 from .noise import Noise, noise_of
 from .problem import FitProblem, Residuals, SumOfSquares
-from .profile import DELTA_CHI2, Profile, profile_side, ProfileJob, ProfileSide
+from .profiles import DELTA_CHI2, Profile, profile_side, ProfileJob, ProfileSide
 from .shooting import initial_starts, Shooting, split
 
 __all__ = ['CONDITION_LIMIT', 'CORRELATION_LIMIT', 'dask_mapper', 'fit', 'FitResult',

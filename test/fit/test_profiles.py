@@ -17,7 +17,7 @@
 from pathlib import Path
 
 from cone_feeder_sim.fit.problem import FitProblem
-from cone_feeder_sim.fit.profile import DELTA_CHI2
+from cone_feeder_sim.fit.profiles import DELTA_CHI2
 from cone_feeder_sim.fit.solve import fit
 from cone_feeder_sim.fit.spec import fit_from_mapping
 from cone_feeder_sim.formats.scenario_file import set_scenario_key
