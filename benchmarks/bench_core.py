@@ -16,6 +16,7 @@
 Benchmark of the physics core: particle-seconds simulated per CPU-second, and accuracy.
 
 Usage: python benchmarks/bench_core.py [--sizes 1 100 1000 10000] [--accuracy 8]
+                                       [--scale 1 10 100]
 
 Each size runs in its own process (so its peak memory is its own) on a reversing scenario:
 pieces at random positions (seeded) resting on the cone, the cone reversing between
@@ -24,6 +25,8 @@ clockwise and counter-clockwise rotation, advanced in 20 ms intervals like the n
 Accuracy: for a sample of the same pieces, exit angles and times (or final positions of
 pieces that stay) are compared with scipy's Radau at rtol 1e-10 on the paper's world-frame
 equations (test/reference_model.py), with the same default solver settings.
+``--scale S ...`` repeats both at tolerances S times the defaults (rtol and every atol),
+side by side in one run: how much accuracy a looser tolerance gives up for its speed.
 """
 
 import argparse
@@ -35,6 +38,7 @@ import subprocess
 import sys
 import time
 
+from calibration import calibration_line
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -57,12 +61,22 @@ def starts(count: int, seed: int = 1) -> np.ndarray:
     return np.column_stack([x, y, z])
 
 
-def run(count: int) -> dict[str, float]:
+def params(scale: float) -> object:
+    """Return the default SimParams with every tolerance multiplied by ``scale``."""
+    from cone_feeder_sim.physics.params import SolverParams
+    from cone_feeder_sim.physics.simulation import SimParams
+    d = SolverParams()
+    return SimParams(solver=SolverParams(
+        rtol=d.rtol * scale, atol_position=d.atol_position * scale,
+        atol_velocity=d.atol_velocity * scale, atol_force=d.atol_force * scale))
+
+
+def run(count: int, scale: float = 1.0) -> dict[str, float]:
     """Simulate count pieces; return timing, particle-seconds and exits."""
     from cone_feeder_sim.physics.rotation import RotationProfile
-    from cone_feeder_sim.physics.simulation import SimParams, Simulator
+    from cone_feeder_sim.physics.simulation import Simulator
     profile = RotationProfile.from_table(TABLE)
-    sim = Simulator(SimParams(), profile)
+    sim = Simulator(params(scale), profile)
     sim.add(starts(count))
     exits: dict[int, tuple[float, float]] = {}
     accepted = rejected = 0
@@ -82,7 +96,7 @@ def run(count: int) -> dict[str, float]:
             'peak_rss_mib': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
-def accuracy(sample: int) -> dict[str, float]:
+def accuracy(sample: int, scale: float = 1.0) -> dict[str, float]:
     """
     Compare pieces of the benchmark set with the Radau reference.
 
@@ -93,9 +107,9 @@ def accuracy(sample: int) -> dict[str, float]:
     sys.path.insert(0, str(ROOT / 'test'))
     import reference_model as ref
     from cone_feeder_sim.physics.rotation import RotationProfile
-    from cone_feeder_sim.physics.simulation import SimParams, Simulator
+    from cone_feeder_sim.physics.simulation import Simulator
     pos = starts(4 * sample)
-    sim = Simulator(SimParams(), RotationProfile.from_table(TABLE))
+    sim = Simulator(params(scale), RotationProfile.from_table(TABLE))
     sim.add(pos)
     mine: dict[int, tuple[float, float]] = {}
     k = 0
@@ -125,31 +139,38 @@ def main() -> int:
     parser.add_argument('--sizes', type=int, nargs='+', default=[1, 100, 1000, 10000])
     parser.add_argument('--accuracy', type=int, default=6,
                         help='pieces compared with the Radau reference (0: skip)')
+    parser.add_argument('--scale', type=float, nargs='+', default=[1.0],
+                        help='tolerances (rtol and atols) times the defaults, one row each')
     parser.add_argument('--single', type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.single is not None:
         run(2)  # warm-up: load or compile the numba kernels
-        print(json.dumps(run(args.single)))
+        print(json.dumps(run(args.single, args.scale[0])))
         return 0
+    print(calibration_line())
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get('PYTHONPATH', ''))
     print(f'reversing scenario: {DURATION} s, omega table {TABLE}, {INTERVAL * 1e3:.0f} ms '
           'intervals, default solver settings, one core')
-    print(f'{"N":>6} {"CPU s":>8} {"particle-s":>11} {"p-s per CPU-s":>14} '
+    print(f'{"scale":>6} {"N":>6} {"CPU s":>8} {"particle-s":>11} {"p-s per CPU-s":>14} '
           f'{"steps/p-s":>10} {"rejected":>9} {"exited":>7} {"peak RSS MiB":>13}')
-    for count in args.sizes:
-        out = subprocess.run([sys.executable, __file__, '--single', str(count)], env=env,
-                             capture_output=True, text=True, check=True).stdout
-        r = json.loads(out.strip().splitlines()[-1])
-        rate = r['particle_s'] / r['cpu_s']
-        print(f'{count:>6} {r["cpu_s"]:>8.2f} {r["particle_s"]:>11.1f} {rate:>14.0f} '
-              f'{r["accepted"] / r["particle_s"]:>10.0f} {r["rejected"]:>9} '
-              f'{r["exited"]:>7} {r["peak_rss_mib"]:>13.0f}')
-    if args.accuracy:
-        worst = accuracy(args.accuracy)
-        print(f'accuracy vs Radau rtol 1e-10 on {worst["compared"]} pieces of this set that '
-              f'leave: max |exit angle error| {worst["angle_deg"]:.2e} deg, max |exit time '
-              f'error| {worst["time_ms"]:.2e} ms, pieces the reference keeps on the cone '
-              f'{worst["mismatch"]}')
+    for scale in args.scale:
+        for count in args.sizes:
+            out = subprocess.run([sys.executable, __file__, '--single', str(count), '--scale',
+                                  str(scale)], env=env, capture_output=True, text=True,
+                                 check=True).stdout
+            r = json.loads(out.strip().splitlines()[-1])
+            rate = r['particle_s'] / r['cpu_s']
+            print(f'{scale:>6g} {count:>6} {r["cpu_s"]:>8.2f} {r["particle_s"]:>11.1f} '
+                  f'{rate:>14.0f} {r["accepted"] / r["particle_s"]:>10.0f} '
+                  f'{r["rejected"]:>9} {r["exited"]:>7} {r["peak_rss_mib"]:>13.0f}',
+                  flush=True)
+    for scale in args.scale if args.accuracy else ():
+        worst = accuracy(args.accuracy, scale)
+        print(f'tolerances x{scale:g}: accuracy vs Radau rtol 1e-10 on {worst["compared"]} '
+              f'pieces of this set that leave: max |exit angle error| '
+              f'{worst["angle_deg"]:.2e} deg, max |exit time error| {worst["time_ms"]:.2e} '
+              f'ms, pieces the reference keeps on the cone {worst["mismatch"]}', flush=True)
+    print(calibration_line())
     return 0
 
 

@@ -23,7 +23,7 @@ from cone_feeder_sim.fit.spec import fit_from_mapping
 from cone_feeder_sim.formats.scenario_file import set_scenario_key
 import numpy as np
 import pytest
-from test_fit import BASE, write_tracks
+from test_fit import BASE, FREE, write_tracks
 
 SHORT = {**BASE, 'duration': 1.5, 'particles': BASE['particles'][:3]}
 
@@ -67,3 +67,22 @@ def test_a_key_that_does_not_change_the_tracks_is_not_identifiable(tmp_path: Pat
     assert len(named) == 2 and 'not identifiable' in named[0]
     mapping = result.as_mapping()['parameters']
     assert mapping['model.young_modulus']['identifiable'] == {'low': False, 'high': False}
+
+
+@pytest.mark.slow
+def test_the_95_percent_intervals_cover_the_truth_over_20_seeds(tmp_path: Path) -> None:
+    # noisy tracks of the same truth, 20 noise seeds: about 19 intervals of 20 should cover
+    base = {**BASE, 'duration': 1.0, 'particles': BASE['particles'][:3]}
+    truth_values = np.array([315.0, 0.7225])
+    truth = set_scenario_key(set_scenario_key(base, 'model.d', 315.0), 'model.mu_C', 0.7225)
+    covered = np.zeros(2, dtype=int)
+    for seed in range(20):
+        folder = tmp_path / str(seed)
+        folder.mkdir()
+        write_tracks(folder / 'tracks.csv', truth, 30.0, 0.001, 100 + seed)
+        result = fit(FitProblem(fit_from_mapping(
+            {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'starts': 1,
+             'processes': 1, 'noise': 0.001}, folder)))
+        assert result.success and result.interval.startswith('profile likelihood')
+        covered += (result.low < truth_values) & (truth_values < result.high)
+    assert all(18 <= c <= 20 for c in covered), covered

@@ -15,15 +15,18 @@
 """Tests of multiple shooting: windows, start guesses, the Jacobian assembled window by window."""
 
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 from cone_feeder_sim.fit.jacobian import forward_jacobian, forward_steps
-from cone_feeder_sim.fit.problem import predict
+from cone_feeder_sim.fit.problem import FitProblem, predict
 from cone_feeder_sim.fit.shooting import initial_starts, Shooting, split, STEPS, UNKNOWNS
-from cone_feeder_sim.fit.spec import FitSpec
+from cone_feeder_sim.fit.solve import fit
+from cone_feeder_sim.fit.spec import fit_from_mapping, FitSpec
 from cone_feeder_sim.fit.tracks import Tracks
-from cone_feeder_sim.formats.scenario_file import scenario_from_mapping
+from cone_feeder_sim.formats.scenario_file import scenario_from_mapping, set_scenario_key
 import numpy as np
 import pytest
+from test_fit import BASE as FIVE_PIECES, FREE, write_tracks
 
 #: Three pieces on a cone that speeds up: 0.6 s.
 BASE = {'duration': 0.6, 'rotation': [[0.0, 0.0], [0.4, -6.0]],
@@ -88,3 +91,23 @@ def test_the_jacobian_window_by_window_equals_column_by_column(contact: bool) ->
     assert jac.shape == (shooting.size, len(z)) == brute.shape
     np.testing.assert_allclose(jac, brute, rtol=1e-6, atol=1e-6 * np.abs(brute).max())
     assert np.count_nonzero(jac[:, 1:]) < 0.5 * jac[:, 1:].size  # the windows' blocks
+
+
+@pytest.mark.slow
+def test_multiple_shooting_converges_where_single_shooting_does_not(tmp_path: Path) -> None:
+    # five pieces over 3 s, tracked until they leave; the start: d 3x too high, mu_C half
+    truth = set_scenario_key(set_scenario_key(FIVE_PIECES, 'model.d', 315.0), 'model.mu_C', 0.7225)
+    write_tracks(tmp_path / 'tracks.csv', truth, 30.0, 0.001, 5, lose_exits=True)
+    far = set_scenario_key(set_scenario_key(FIVE_PIECES, 'model.d', 1000.0), 'model.mu_C', 0.35)
+    content = {'scenario': far, 'tracks': 'tracks.csv', 'free': FREE, 'starts': 1,
+               'processes': 1}
+    single = fit(FitProblem(fit_from_mapping(content, tmp_path)))
+    assert abs(single.estimate[0] - 315.0) > 10.0 * single.stderr[0]  # another valley
+    # ... and the test of fit says so, naming pieces that do not fit
+    assert not single.success and single.fit_test is not None and single.fit_test.failing
+    assert single.warnings[0].startswith('the fit fails its test'), single.warnings
+    problem = FitProblem(fit_from_mapping({**content, 'segments': 0.25}, tmp_path))
+    shooting = fit(problem)
+    assert problem.window_simulations > 0
+    for value, estimate, stderr in zip((315.0, 0.7225), shooting.estimate, shooting.stderr):
+        assert abs(estimate - value) < 2.0 * stderr
