@@ -117,7 +117,7 @@ class EnvConfig:
     action: str = 'omega'
     discrete_omega: float = 5.0
     feed_amplitudes: bool = False
-    normalize_actions: bool = False
+    normalize_actions: bool = True
     observation: str = 'grid'
     grid: tuple[int, int] = (4, 8)
     max_pieces_observed: int = 64
@@ -265,7 +265,7 @@ def _build(content: Mapping[str, Any], base_dir: Path | None) -> EnvConfig:
         discrete_omega=check_number('discrete_omega', content.get('discrete_omega', 5.0),
                                     ENV_LIMITS['discrete_omega']),
         feed_amplitudes=amplitudes,
-        normalize_actions=_flag('normalize_actions', content.get('normalize_actions', False)),
+        normalize_actions=_flag('normalize_actions', content.get('normalize_actions', True)),
         observation=_choice('observation', content.get('observation', 'grid'), OBSERVATIONS),
         grid=grid,
         max_pieces_observed=check_integer('max_pieces_observed',

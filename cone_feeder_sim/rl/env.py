@@ -21,11 +21,12 @@ it within ``max_angular_acceleration``), the feed drops pieces, and the engine t
 
 **Actions** (``action``):
 
-* ``omega`` (default): ``Box([-w_max], [w_max])`` float32, the target in rad/s (w_max =
-  ``drive.max_angular_velocity``; values outside are clipped). With ``feed_amplitudes``
+* ``omega`` (default): ``Box([-1], [1])`` float32, the target over w_max
+  (``drive.max_angular_velocity``; values outside are clipped). With ``feed_amplitudes``
   (weigher on) the Box has ``1 + channels`` entries: the target, then each dosing channel's
-  feed amplitude in [0, 2] (1 = nominal, 0 = stopped). With ``normalize_actions`` every
-  entry is in [-1, 1] instead: omega / w_max, and amplitude - 1.
+  feed amplitude minus 1, also in [-1, 1] (amplitude 1 = nominal, 0 = stopped). With
+  ``normalize_actions: false`` the entries are the target in rad/s, in [-w_max, w_max],
+  and the amplitudes in [0, 2].
 * ``discrete``: ``Discrete(3)``: 0 turns clockwise seen from above (-``discrete_omega``),
   1 stops, 2 turns counter-clockwise (+``discrete_omega``).
 
