@@ -386,7 +386,7 @@ class FeederEngine:
         self._state = SimState()
         self._channel_mass = np.zeros(config.model.channels.count)
         self._observers: list[TickObserver] = []
-        warm_up()  # the kernels are loaded now, never inside a tick
+        warm_up(config.model)  # its kernels are loaded now, never inside a tick
         if config.weigher is not None:
             warm_up_weigher()
         self._start(0.0)

@@ -41,7 +41,8 @@ from .integrator import (
 from .model import STATE_SIZE
 from .neighbours import contact_pairs
 from .params import (
-    ModelParams, P_M, P_S0, product_row, PRODUCT_WIDTH, ProductParams, SolverParams)
+    COUPLING_CHOICES, ModelParams, P_M, P_S0, product_row, PRODUCT_WIDTH, ProductParams,
+    SolverParams)
 from .rotation import rotate_z, RotationProfile
 from ..errors import ScenarioError
 
@@ -716,31 +717,38 @@ def resting_height(model: ModelParams, product: ProductParams, x: float, y: floa
     return cone_surface_height(model, x, y) + gap
 
 
-def warm_up() -> None:
+def warm_up(model: ModelParams | None = None) -> None:
     """
-    Compile (or load from numba's cache) the integration kernel now, not inside a tick.
+    Compile (or load from numba's cache) the integration kernels now, not inside a tick.
 
     Runs a tiny integration of one piece with the default parameters, then of two touching
-    pieces with interactions on (the contact kernels): the kernel's
-    signature depends on the kinds of arrays, which are the same for every run (SimParams
-    makes the same read-only rows whatever the values), so this loads exactly the kernel a
-    run calls, and cannot fail on a run's own parameters. A first call after an install
-    compiles (about 10 s on the development machine); later ones load the cache in well
-    under a second.
+    pieces with interactions on (the contact kernels): the kernel's signature depends on the
+    kinds of arrays, which are the same for every run (SimParams makes the same read-only
+    rows whatever the values), so this loads exactly the kernels a run calls, and cannot
+    fail on a run's own parameters. With ``model``, only what a run of that model calls: a
+    piece alone, and the coupling of its interactions where they are on (a first start with
+    an empty cache then compiles neither the other coupling nor the batched kernel of the
+    RL vector environment). Without, every kernel (``cone-feeder-sim compile``, which the
+    install runs). A first call after an install compiles (tens of seconds); later ones
+    load the cache in well under a second.
     """
     params = SimParams()
-    model = params.model
-    x = 0.5 * model.r
-    start = (x, 0.0, resting_height(model, model.product, x, 0.0))
+    base = params.model
+    x = 0.5 * base.r
+    start = (x, 0.0, resting_height(base, base.product, x, 0.0))
     state, _ = add_particles(SimState(), params, [start], None, None, omega=0.0)
     advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
-    advance_many([state], params, [RotationProfile.constant(1.0)], [1.0e-3])  # batched
+    if model is None:
+        advance_many([state], params, [RotationProfile.constant(1.0)], [1.0e-3])  # batched
+        couplings: tuple[str, ...] = COUPLING_CHOICES
+    else:
+        couplings = (model.interactions.coupling,) if model.interactions.enabled else ()
     # the contact kernels (neighbour search, multirate and exact coupling) with two touching
     # pieces
-    other = (x + 0.045, 0.0, resting_height(model, model.product, x + 0.045, 0.0))
-    for coupling in ('multirate', 'exact'):
-        touching = replace(model, interactions=replace(model.interactions, enabled=True,
-                                                       coupling=coupling))
+    other = (x + 0.045, 0.0, resting_height(base, base.product, x + 0.045, 0.0))
+    for coupling in couplings:
+        touching = replace(base, interactions=replace(base.interactions, enabled=True,
+                                                      coupling=coupling))
         params = SimParams(model=touching, solver=params.solver)
         state, _ = add_particles(SimState(), params, [start, other], None, None, omega=0.0)
         advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
