@@ -30,7 +30,8 @@ The search scale is θ: log p for a parameter whose range is positive, p otherwi
 2. **Test of fit** (:mod:`goodness`): the residuals against the tracks' noise sigma
    (``noise:``, or estimated from the tracks, :mod:`noise`), whole and piece by piece. A fit
    that fails it has ``success: false`` and a warning naming the pieces.
-3. **Intervals** (:mod:`profiles`): the 95 % profile-likelihood interval of every key, from
+3. **Intervals** (:mod:`profiles`; ``profiles: false``: ±1.96 standard errors in θ from the
+   Jacobian instead): the 95 % profile-likelihood interval of every key, from
    2 ΔC / sigma² = chi^2_1(0.95). A fit that failed its test gets no intervals: its low
    and high are the free range, and ``interval`` says so.
    A profile flat to a bound names the key as not identifiable that way.
@@ -198,12 +199,15 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
         test = goodness_of_fit(best.fun, problem.owners(estimate), noise, len(spec.keys))
         result.fit_test = test
         sides = []
-        if test.passed:
+        if test.passed and spec.profiles:
             sides = run(profile_side, _profile_jobs(task, best, lb, ub, noise.sigma ** 2))
             problem.count(sum(side.simulations for side in sides))
     result.simulations = problem.simulations
-    if test.passed:
+    if test.passed and spec.profiles:
         _intervals(result, spec.keys, logs, lb, ub, sides, noise)
+    elif test.passed:
+        result.interval = ('Jacobian, 95 % (estimate ± 1.96 standard errors in the search '
+                           'scale; profiles: false)')
     else:
         result.low, result.high = bounds[:, 0].copy(), bounds[:, 1].copy()
         result.interval = ('not estimated: the fit failed its test (low and high are the '
@@ -418,8 +422,13 @@ def _statistics(problem: FitProblem, result: LocalOutcome, estimate: np.ndarray,
         if not stderr[i] < abs(estimate[i]):
             warnings.append(f'{keys[i]}: standard error {stderr[i]:.3g} is not smaller than '
                             f'the estimate {estimate[i]:.3g}: not identified')
-    return FitResult(keys=keys, estimate=estimate, stderr=stderr, low=np.array(estimate),
-                     high=np.array(estimate), correlation=correlation, cost=float(result.cost),
+    sigma_theta = np.sqrt(np.maximum(np.diag(cov_theta), 0.0))
+    theta = np.where(logs, np.log(np.where(logs, estimate, 1.0)), estimate)
+    with np.errstate(over='ignore'):  # an unidentified key's interval may reach infinity
+        low = np.where(logs, np.exp(theta - 1.96 * sigma_theta), estimate - 1.96 * stderr)
+        high = np.where(logs, np.exp(theta + 1.96 * sigma_theta), estimate + 1.96 * stderr)
+    return FitResult(keys=keys, estimate=estimate, stderr=stderr, low=low,
+                     high=high, correlation=correlation, cost=float(result.cost),
                      simulations=problem.simulations, piece_rms=problem.piece_rms(estimate),
                      window_simulations=problem.window_simulations,
                      warnings=warnings, success=bool(result.success),

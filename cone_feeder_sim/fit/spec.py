@@ -32,6 +32,7 @@ A fit file is a YAML mapping::
     starts: 8                # the start values and starts - 1 seeded points in the bounds
     noise: 0.001             # optional: the tracks' noise sigma (m); estimated if absent
     processes: 0             # processes that run the starts and profiles (0: one per core)
+    profiles: true           # false: intervals from the Jacobian (±1.96 sigma), no profiles
     method: local            # or global: differential evolution over the bounds, then local
     global: {popsize: 8, maxiter: 15, seed: 0}   # the differential evolution (method: global)
     workers: 1               # threads that run a fit's simulations side by side (0: cores)
@@ -63,7 +64,7 @@ from ..physics.simulation import cone_surface_height
 __all__ = ['FitSpec', 'fit_from_mapping', 'load_fit', 'LOSSES', 'RESIDUALS']
 
 FIT_KEYS = ('scenario', 'tracks', 'tracks_every', 'free', 'residual', 'exit_sigma', 'segments',
-            'loss', 'starts', 'method', 'global', 'workers', 'noise', 'processes')
+            'loss', 'starts', 'method', 'global', 'workers', 'noise', 'processes', 'profiles')
 #: Starts of a fit by default (multistart: doc/fit.md measured what one start misses).
 DEFAULT_STARTS = 8
 #: The searches: least squares from the start values, or differential evolution first.
@@ -89,8 +90,8 @@ class FitSpec:
 
     keys: the free dotted keys; bounds (low, high) and start value of each; residual,
     segments (s, or None: single shooting only), loss, starts, method, global_options
-    (popsize, maxiter, seed), workers, processes as in the file; noise (m, or None:
-    estimated from the tracks). With ``residual: exits``, exits holds
+    (popsize, maxiter, seed), workers, processes, profiles as in the file; noise (m, or
+    None: estimated from the tracks). With ``residual: exits``, exits holds
     the observed exits, exit_sigma their uncertainty (deg, s), and tracks is empty.
     """
 
@@ -111,6 +112,7 @@ class FitSpec:
     workers: int = 1
     noise: float | None = None
     processes: int = 0
+    profiles: bool = True
 
     def scenario_mapping(self, values: Any) -> dict[str, Any]:
         """Return the scenario mapping with the free keys set to ``values``."""
@@ -266,6 +268,9 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     if noise is not None and (isinstance(noise, bool) or not isinstance(noise, (int, float))
                               or not 0.0 < noise < math.inf):
         raise ScenarioError(f'noise must be a positive number (m), got {noise!r}')
+    profiles = content.get('profiles', True)
+    if not isinstance(profiles, bool):
+        raise ScenarioError(f'profiles must be true or false, got {profiles!r}')
     processes = content.get('processes', 0)
     if isinstance(processes, bool) or not isinstance(processes, int) or processes < 0:
         raise ScenarioError(f'processes must be 0 (one per core) or a positive integer, got '
@@ -276,7 +281,7 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
                    segments=segments, loss=loss,
                    starts=starts, method=method, global_options=tuple(merged.items()),
                    workers=workers, noise=None if noise is None else float(noise),
-                   processes=processes)
+                   processes=processes, profiles=profiles)
 
 
 def _check_pieces(particle: np.ndarray, pieces: int) -> None:

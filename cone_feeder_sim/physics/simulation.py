@@ -717,7 +717,7 @@ def resting_height(model: ModelParams, product: ProductParams, x: float, y: floa
     return cone_surface_height(model, x, y) + gap
 
 
-def warm_up(model: ModelParams | None = None) -> None:
+def warm_up(model: ModelParams | None = None, batched: bool = False) -> None:
     """
     Compile (or load from numba's cache) the integration kernels now, not inside a tick.
 
@@ -728,8 +728,9 @@ def warm_up(model: ModelParams | None = None) -> None:
     fail on a run's own parameters. With ``model``, only what a run of that model calls: a
     piece alone, and the coupling of its interactions where they are on (a first start with
     an empty cache then compiles neither the other coupling nor the batched kernel of the
-    RL vector environment). Without, every kernel (``cone-feeder-sim compile``, which the
-    install runs). A first call after an install compiles (tens of seconds); later ones
+    RL vector environment, unless ``batched``: :func:`advance_many`, which the RL vector
+    environment loads when it is built). Without, every kernel (``cone-feeder-sim compile``,
+    which the install runs). A first call after an install compiles (tens of seconds); later ones
     load the cache in well under a second.
     """
     params = SimParams()
@@ -738,10 +739,10 @@ def warm_up(model: ModelParams | None = None) -> None:
     start = (x, 0.0, resting_height(base, base.product, x, 0.0))
     state, _ = add_particles(SimState(), params, [start], None, None, omega=0.0)
     advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
-    if model is None:
-        advance_many([state], params, [RotationProfile.constant(1.0)], [1.0e-3])  # batched
-        couplings: tuple[str, ...] = COUPLING_CHOICES
-    else:
+    if model is None or batched:
+        advance_many([state], params, [RotationProfile.constant(1.0)], [1.0e-3])
+    couplings: tuple[str, ...] = COUPLING_CHOICES
+    if model is not None:
         couplings = (model.interactions.coupling,) if model.interactions.enabled else ()
     # the contact kernels (neighbour search, multirate and exact coupling) with two touching
     # pieces

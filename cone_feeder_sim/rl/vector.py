@@ -47,6 +47,7 @@ from .config import EnvConfig, load_env_config
 from .env import ConeFeederEnv
 from ..errors import EnvConfigError
 from ..feeder.engine import tick_many, TickResult
+from ..physics.simulation import warm_up
 
 __all__ = ['ConeFeederVectorEnv']
 
@@ -86,6 +87,7 @@ class ConeFeederVectorEnv(gymnasium.vector.VectorEnv):
         elif overrides:
             raise EnvConfigError('overrides need a file or a mapping, not an EnvConfig')
         self.config = config
+        warm_up(config.engine.model, batched=True)  # tick_many's kernel, before any step
         self.envs = [ConeFeederEnv(config, render_mode=render_mode) for _ in range(num_envs)]
         self.num_envs = num_envs
         self.render_mode = render_mode

@@ -24,7 +24,7 @@ from cone_feeder_sim.feeder.engine import (
 from cone_feeder_sim.physics.integrator import advance_batch, advance_batch_owned
 from cone_feeder_sim.physics.params import (
     ChannelLayout, InteractionParams, ModelParams, SolverParams)
-from cone_feeder_sim.physics.simulation import resting_height
+from cone_feeder_sim.physics.simulation import resting_height, warm_up
 from crowds import crowd_in_layers
 import numpy as np
 import pytest
@@ -496,8 +496,9 @@ def test_no_contact_kernel_is_compiled_inside_a_tick() -> None:
     from cone_feeder_sim.physics.coupling import advance_coupled
     from cone_feeder_sim.physics.exact import advance_island
     from cone_feeder_sim.physics.neighbours import _contact_pairs
-    kernels = (advance_coupled, advance_island, _contact_pairs)
-    for coupling in ('multirate', 'exact'):
+    # each engine loads the kernels of its own coupling when it is built
+    for coupling, kernels in (('multirate', (advance_coupled, _contact_pairs)),
+                              ('exact', (advance_island, _contact_pairs))):
         eng = engine(model=ModelParams(interactions=InteractionParams(enabled=True,
                                                                       coupling=coupling)),
                      feed=FeedParams(rate=0.0))
@@ -595,7 +596,9 @@ def test_tick_many_equals_each_engines_own_ticks() -> None:
         return made
 
     together, alone = engines(), engines()
-    loaded = list(advance_batch_owned.signatures)  # warm_up loaded it: none compiles in a tick
+    # tick_many's callers load its kernel first (the RL vector environment, when built)
+    warm_up(ModelParams(), batched=True)
+    loaded = list(advance_batch_owned.signatures)  # none compiles in a tick
     assert loaded
     exits = 0
     for _ in range(30):

@@ -143,6 +143,7 @@ def test_the_command_writes_the_result(tmp_path: Path, capsys: pytest.CaptureFix
     ({'noise': 0.0}, 'noise must be a positive number (m), got 0.0'),
     ({'noise': 'small'}, "noise must be a positive number (m), got 'small'"),
     ({'processes': -1}, 'processes must be 0 (one per core) or a positive integer'),
+    ({'profiles': 'yes'}, "profiles must be true or false, got 'yes'"),
     ({'method': 'anneal'}, 'method must be one of local, global'),
     ({'global': {'generations': 3}}, "unknown global key(s) 'generations'"),
     ({'global': {'popsize': 0}}, 'global.popsize must be an integer >= 1'),
@@ -218,7 +219,7 @@ def test_the_global_search_finds_the_valley_the_local_one_misses(tmp_path: Path)
     assert abs(local.estimate[0] - 315.0) > 50.0  # stopped in another valley
     results = [fit(FitProblem(fit_from_mapping(
         {**content, 'method': 'global', 'global': {'popsize': 6, 'maxiter': 12},
-         'workers': workers}, tmp_path))) for workers in (1, 2)]
+         'workers': workers, 'profiles': False}, tmp_path))) for workers in (1, 2)]
     for result in results:
         for value, estimate, stderr in zip((315.0, 0.7225), result.estimate, result.stderr):
             assert abs(estimate - value) < 2.0 * stderr

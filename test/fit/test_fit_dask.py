@@ -39,7 +39,7 @@ def test_a_fit_on_a_dask_cluster_is_the_fit_here(tmp_path: Path,
     fits = [{'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'method': 'global',
              'global': {'popsize': 3, 'maxiter': 2}, 'starts': 2, 'processes': 1},
             {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'segments': 0.3,
-             'starts': 2, 'processes': 1}]
+             'starts': 2, 'processes': 1, 'profiles': False}]
     here = [fit(FitProblem(fit_from_mapping(content, tmp_path))) for content in fits]
     (tmp_path / 'fit.yaml').write_text(yaml.safe_dump(fits[0]))
     with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
