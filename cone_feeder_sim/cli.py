@@ -51,7 +51,7 @@ from .feeder.scenario import Scenario
 from .formats.mcap_reader import recover_mcap
 from .formats.run_files import run_to_files, RunFiles
 from .formats.scenario_file import load_scenario
-from .physics.simulation import Simulator, StepResult, warm_up
+from .physics.simulation import kernel_cache_note, Simulator, StepResult, warm_up
 from .view.live import DEFAULT_FPS, DEFAULT_PORT, LiveView
 from .view.topics import layout_file
 
@@ -347,16 +347,11 @@ def cmd_report(args: argparse.Namespace, err: TextIO) -> int:
 
 def cmd_compile(err: TextIO) -> int:
     """Compile or load the kernel (numba's cache); say where it is and how long it took."""
-    from .physics.integrator import advance_batch
     from .weigher.combination import warm_up as warm_up_weigher
     start = time.perf_counter()
     warm_up()
     warm_up_weigher()
-    seconds = time.perf_counter() - start
-    stats = advance_batch.stats
-    how = 'loaded from the cache' if stats.cache_hits and not stats.cache_misses else 'compiled'
-    err.write(f'integration kernel {how} in {seconds:.1f} s '
-              f'(cache: {stats.cache_path})\n')
+    err.write(kernel_cache_note(time.perf_counter() - start) + '\n')
     return 0
 
 

@@ -27,6 +27,7 @@ centre of the cone base); the integrator works in cone axes (see cone_feeder_sim
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -753,3 +754,25 @@ def warm_up(model: ModelParams | None = None, batched: bool = False) -> None:
         params = SimParams(model=touching, solver=params.solver)
         state, _ = add_particles(SimState(), params, [start, other], None, None, omega=0.0)
         advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
+
+
+def kernel_cache_note(seconds: float) -> str:
+    """
+    Return one line on the integration kernel: loaded from numba's cache or compiled, where.
+
+    seconds: how long loading took. Where the package's folder cannot be written (an install
+    owned by root) numba keeps its cache in the user's cache directory instead (or in
+    ``NUMBA_CACHE_DIR``); the line says so, and how to fill the cache once.
+    """
+    from .integrator import advance_batch
+    stats = advance_batch.stats
+    loaded = bool(stats.cache_hits) and not stats.cache_misses
+    path = Path(str(stats.cache_path)).resolve()
+    note = (f'numba kernels {"loaded from the cache" if loaded else "compiled"} in '
+            f'{seconds:.1f} s (cache: {path}')
+    if not path.is_relative_to(Path(__file__).resolve().parent.parent):
+        note += ", outside the package's folder: the user's cache directory or NUMBA_CACHE_DIR"
+    note += ')'
+    if not loaded:
+        note += '; run `cone-feeder-sim compile` once after installing, so no start compiles'
+    return note

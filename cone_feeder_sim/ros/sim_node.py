@@ -153,7 +153,7 @@ from ..formats.runlog import (
 from ..formats.topics import MessageRecord, QosProfile, TOPICS
 from ..physics.integrator import set_threads
 from ..physics.params import ModelParams
-from ..physics.simulation import position_problems
+from ..physics.simulation import kernel_cache_note, position_problems
 
 __all__ = ['SimNode', 'TopicInfo', 'main']
 
@@ -229,7 +229,9 @@ class SimNode(GuardedNode):
             set_threads(int(values['threads']))
         except ValueError as exc:
             raise ParameterError(str(exc)) from exc
+        loading = time.monotonic()
         self._engine = FeederEngine(engine_config_from_values(values, self._base_model))
+        self.get_logger().info(kernel_cache_note(time.monotonic() - loading))
         self._frame = str(values['frame_id'])
         self._pacer = Pacer(self._engine.dt, float(values['real_time_factor']),
                             float(values['catch_up']))
