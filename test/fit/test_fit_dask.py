@@ -35,11 +35,11 @@ def test_a_fit_on_a_dask_cluster_is_the_fit_here(tmp_path: Path,
     base = {**BASE, 'duration': 0.6, 'particles': BASE['particles'][:3]}
     truth = set_scenario_key(set_scenario_key(base, 'model.d', 315.0), 'model.mu_C', 0.7225)
     write_tracks(tmp_path / 'tracks.csv', truth, 30.0, 0.001, 7, lose_exits=True)
-    # two starts each: the starts and the profiles' sides are the cluster's jobs too
+    # the starts and the profiles' sides are the cluster's jobs too
     fits = [{'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'method': 'global',
              'global': {'popsize': 3, 'maxiter': 2}, 'starts': 2, 'processes': 1},
             {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'segments': 0.3,
-             'starts': 2, 'processes': 1, 'profiles': False}]
+             'starts': 1, 'processes': 1, 'profiles': False}]
     here = [fit(FitProblem(fit_from_mapping(content, tmp_path))) for content in fits]
     (tmp_path / 'fit.yaml').write_text(yaml.safe_dump(fits[0]))
     with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:

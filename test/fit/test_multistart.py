@@ -45,12 +45,17 @@ def test_starts_inside_the_best_ones_confidence_region_reached_it() -> None:
 
 @pytest.mark.slow
 def test_the_default_starts_find_the_valley_one_start_misses(tmp_path: Path) -> None:
-    # the tracks and the far start of the test above, with the fit file's defaults
-    truth = set_scenario_key(set_scenario_key(BASE, 'model.d', 315.0), 'model.mu_C', 0.7225)
-    write_tracks(tmp_path / 'tracks.csv', truth, 30.0, 0.001, 5, lose_exits=True)
-    far = set_scenario_key(set_scenario_key(BASE, 'model.d', 1000.0), 'model.mu_C', 0.35)
-    result = fit(FitProblem(fit_from_mapping({'scenario': far, 'tracks': 'tracks.csv',
-                                              'free': FREE}, tmp_path)))
+    # three pieces over 2 s, started far off (d = 20, mu_C = 0.95): one start stops in
+    # another valley, and the test of fit says so; the defaults (8 starts) find the truth
+    base = {**BASE, 'duration': 2.0, 'particles': BASE['particles'][:3]}
+    truth = set_scenario_key(set_scenario_key(base, 'model.d', 315.0), 'model.mu_C', 0.7225)
+    write_tracks(tmp_path / 'tracks.csv', truth, 30.0, 0.001, 5)
+    far = set_scenario_key(set_scenario_key(base, 'model.d', 20.0), 'model.mu_C', 0.95)
+    content = {'scenario': far, 'tracks': 'tracks.csv', 'free': FREE}
+    one = fit(FitProblem(fit_from_mapping({**content, 'starts': 1, 'processes': 1}, tmp_path)))
+    assert abs(one.estimate[0] - 315.0) > 50.0 and not one.success
+    assert one.warnings[0].startswith('the fit fails its test')
+    result = fit(FitProblem(fit_from_mapping(content, tmp_path)))
     assert result.success, result.warnings
     assert len(result.start_costs) == 8 and result.reached_best >= 2
     assert result.start_costs[-1] > result.start_costs[0]  # some starts ended elsewhere

@@ -79,7 +79,7 @@ def test_the_95_percent_intervals_cover_the_truth_over_20_seeds(tmp_path: Path) 
     for seed in range(20):
         folder = tmp_path / str(seed)
         folder.mkdir()
-        write_tracks(folder / 'tracks.csv', truth, 30.0, 0.001, 100 + seed)
+        write_tracks(folder / 'tracks.csv', truth, 15.0, 0.001, 100 + seed)
         result = fit(FitProblem(fit_from_mapping(
             {'scenario': base, 'tracks': 'tracks.csv', 'free': FREE, 'starts': 1,
              'processes': 1, 'noise': 0.001}, folder)))
