@@ -23,7 +23,9 @@ The search scale is θ: log p for a parameter whose range is positive, p otherwi
    point it finds; with ``segments``, a multiple-shooting fit (:mod:`shooting`) from that
    start is one more start. Each start is a bounded least-squares fit (trust-region
    reflective, forward-difference Jacobian); the starts run on processes (``processes``,
-   one per core by default; a Dask cluster's workers with ``--workers``/``--scheduler``),
+   one per numba thread by default, so every core unless ``NUMBA_NUM_THREADS`` or
+   ``numba.set_num_threads`` says fewer; a Dask cluster's workers with
+   ``--workers``/``--scheduler``),
    a single start in this process with ``workers`` threads for its Jacobian's columns.
    The lowest cost wins; the result says how many starts reached it (inside its joint 95 %
    confidence region).
@@ -228,7 +230,7 @@ def _jobs(mapper: Mapper | None, processes: int) -> Iterator[Callable[..., list[
     batch of more than one job and serves every batch after it.
     """
     executor: list[ProcessPoolExecutor] = []
-    count = processes or os.cpu_count() or 1
+    count = processes or numba.get_num_threads()
 
     def run(function: Callable[[Any], Any], jobs: Iterable[Any]) -> list[Any]:
         jobs = list(jobs)

@@ -31,7 +31,7 @@ A fit file is a YAML mapping::
     loss: linear             # or soft_l1, huber, cauchy, arctan (scipy's robust losses)
     starts: 8                # the start values and starts - 1 seeded points in the bounds
     noise: 0.001             # optional: the tracks' noise sigma (m); estimated if absent
-    processes: 0             # processes that run the starts and profiles (0: one per core)
+    processes: 0             # processes for the starts and profiles (0: one per numba thread)
     profiles: true           # false: intervals from the Jacobian (±1.96 sigma), no profiles
     method: local            # or global: differential evolution over the bounds, then local
     global: {popsize: 8, maxiter: 15, seed: 0}   # the differential evolution (method: global)
