@@ -169,7 +169,9 @@ def test_truncated_file_replays_its_readable_part(ros: Ros, tmp_path: Path) -> N
     path = synthetic(tmp_path / 'long.mcap', count=500, chunk_size=600)
     data = path.read_bytes()
     path.write_bytes(data[:int(len(data) * 0.6)])  # a copy cut short: no summary, no footer
-    counter = ros.listen(Float64, '/counter')
+    # a queue for every message: on a loaded machine the replay's catch-up bursts outrun
+    # this executor's subscription callbacks
+    counter = ros.listen(Float64, '/counter', 1000)
     reports = ros.listen(DiagnosticArray, '/diagnostics')
     node = ros.replay(path=str(path), rate=20.0, delay=0.5, progress_period=0.1)
     assert ros.spin_until(lambda: node.done.done(), 30.0)
