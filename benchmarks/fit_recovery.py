@@ -28,38 +28,20 @@ be none). ``--keys 3`` frees mu_S too (truths drawn in [0.5, 2])::
 """
 
 import argparse
-import csv
 from pathlib import Path
 import tempfile
 import time
 
-from bench_fit import BASE
+from bench_fit import BASE, write_tracks
 from calibration import calibration_line
-from cone_feeder_sim.fit.problem import FitProblem, predict
+from cone_feeder_sim.fit.problem import FitProblem
 from cone_feeder_sim.fit.solve import fit
 from cone_feeder_sim.fit.spec import fit_from_mapping
-from cone_feeder_sim.fit.tracks import Tracks
-from cone_feeder_sim.formats.scenario_file import scenario_from_mapping, set_scenario_key
+from cone_feeder_sim.formats.scenario_file import set_scenario_key
 from cone_feeder_sim.physics.simulation import warm_up
 import numpy as np
 
 BOXES = {'model.d': (10.0, 1000.0), 'model.mu_C': (0.3, 0.98), 'model.mu_S': (0.5, 2.0)}
-
-
-def tracks_of(truth: dict, folder: Path, seed: int) -> None:
-    """Write 1-mm tracks of ``truth`` at 30 frames/s, each piece until it leaves."""
-    scenario = scenario_from_mapping(truth)
-    times = np.arange(0.0, 3.0, 1.0 / 30.0)
-    particle = np.tile(np.arange(5), len(times))
-    t = np.repeat(times, 5)
-    seen = predict(scenario, Tracks(particle, t, np.zeros((len(t), 3))))
-    keep = np.hypot(seen[:, 0], seen[:, 1]) < scenario.model.r - 1e-6
-    seen += np.random.default_rng(seed).normal(0.0, 0.001, seen.shape)
-    with (folder / 'tracks.csv').open('w', newline='') as stream:
-        writer = csv.writer(stream)
-        writer.writerow(['particle', 't', 'x', 'y'])
-        writer.writerows((p, s, x, y) for p, s, (x, y, _) in zip(
-            particle[keep], t[keep], seen[keep]))
 
 
 def main() -> None:
@@ -84,7 +66,7 @@ def main() -> None:
             truth = set_scenario_key(truth, key, value)
         with tempfile.TemporaryDirectory() as name:
             folder = Path(name)
-            tracks_of(truth, folder, 100 + n)
+            write_tracks(folder, truth, 100 + n)
             start = time.perf_counter()
             result = fit(FitProblem(fit_from_mapping(
                 {'scenario': BASE, 'tracks': 'tracks.csv',

@@ -207,14 +207,23 @@ def test_a_recorded_run_is_a_test_subject(tmp_path: Path) -> None:
     assert d['estimate'] == pytest.approx(result.estimate[0], rel=1e-9)
 
 
-@pytest.mark.slow
-def test_the_global_search_finds_the_valley_the_local_one_misses(tmp_path: Path) -> None:
+def far_start(folder: Path) -> dict:
+    """
+    Write tracks of three pieces over 2 s (d = 315, mu_C = 0.7225) into ``folder``.
+
+    Return a fit of them from far off (d = 20, mu_C = 0.95), where one start stops in
+    another valley.
+    """
     base = {**BASE, 'duration': 2.0, 'particles': BASE['particles'][:3]}
     truth = set_scenario_key(set_scenario_key(base, 'model.d', 315.0), 'model.mu_C', 0.7225)
-    write_tracks(tmp_path / 'tracks.csv', truth, 30.0, 0.001, 5)
+    write_tracks(folder / 'tracks.csv', truth, 30.0, 0.001, 5)
     far = set_scenario_key(set_scenario_key(base, 'model.d', 20.0), 'model.mu_C', 0.95)
-    content = {'scenario': far, 'tracks': 'tracks.csv', 'free': FREE, 'starts': 1,
-               'processes': 1}
+    return {'scenario': far, 'tracks': 'tracks.csv', 'free': FREE}
+
+
+@pytest.mark.slow
+def test_the_global_search_finds_the_valley_the_local_one_misses(tmp_path: Path) -> None:
+    content = {**far_start(tmp_path), 'starts': 1, 'processes': 1}
     local = fit(FitProblem(fit_from_mapping(content, tmp_path)))
     assert abs(local.estimate[0] - 315.0) > 50.0  # stopped in another valley
     results = [fit(FitProblem(fit_from_mapping(

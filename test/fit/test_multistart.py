@@ -20,10 +20,9 @@ from cone_feeder_sim.fit.multistart import same_minimum, start_points
 from cone_feeder_sim.fit.problem import FitProblem
 from cone_feeder_sim.fit.solve import fit
 from cone_feeder_sim.fit.spec import fit_from_mapping
-from cone_feeder_sim.formats.scenario_file import set_scenario_key
 import numpy as np
 import pytest
-from test_fit import BASE, FREE, write_tracks
+from test_fit import far_start
 
 
 def test_the_starts_cut_every_range_into_strata_and_are_seeded() -> None:
@@ -47,11 +46,7 @@ def test_starts_inside_the_best_ones_confidence_region_reached_it() -> None:
 def test_the_default_starts_find_the_valley_one_start_misses(tmp_path: Path) -> None:
     # three pieces over 2 s, started far off (d = 20, mu_C = 0.95): one start stops in
     # another valley, and the test of fit says so; the defaults (8 starts) find the truth
-    base = {**BASE, 'duration': 2.0, 'particles': BASE['particles'][:3]}
-    truth = set_scenario_key(set_scenario_key(base, 'model.d', 315.0), 'model.mu_C', 0.7225)
-    write_tracks(tmp_path / 'tracks.csv', truth, 30.0, 0.001, 5)
-    far = set_scenario_key(set_scenario_key(base, 'model.d', 20.0), 'model.mu_C', 0.95)
-    content = {'scenario': far, 'tracks': 'tracks.csv', 'free': FREE}
+    content = far_start(tmp_path)
     one = fit(FitProblem(fit_from_mapping({**content, 'starts': 1, 'processes': 1}, tmp_path)))
     assert abs(one.estimate[0] - 315.0) > 50.0 and not one.success
     assert one.warnings[0].startswith('the fit fails its test')
