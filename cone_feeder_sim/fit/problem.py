@@ -169,15 +169,3 @@ class FitProblem:
             self.count(1)
             return exit_residuals(self.spec, self.scenario(values))[1]
         return np.repeat(self.spec.tracks.particle, self._columns)
-
-    def piece_rms(self, values: np.ndarray) -> dict[int, float]:
-        """Return the root mean square residual of each piece (m; exits: in sigmas)."""
-        exits = self.spec.exits
-        if exits is not None:
-            self.count(1)
-            residuals, owner = exit_residuals(self.spec, self.scenario(values))
-            return {int(p): float(np.sqrt(np.mean(residuals[owner == p] ** 2)))
-                    for p in exits.particle}
-        rows = self.residuals(values).reshape(len(self.spec.tracks), self._columns)
-        return {int(p): float(np.sqrt(np.mean(rows[self.spec.tracks.particle == p] ** 2)))
-                for p in np.unique(self.spec.tracks.particle)}

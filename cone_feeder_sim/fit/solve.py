@@ -194,11 +194,12 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
         noise = (noise_of(spec.noise, spec.tracks) if spec.exits is None
                  else Noise(sigma=1.0, source='exit_sigma'))
         estimate = task.values(best.x)
-        result = _statistics(problem, best, estimate, logs)
+        owners = problem.owners(estimate)
+        result = _statistics(problem, best, estimate, logs, owners)
         result.start_costs = sorted(o.cost for o in outcomes)
         result.reached_best = int(same_minimum(np.array(result.start_costs), noise.sigma,
                                                len(spec.keys)).sum())
-        test = goodness_of_fit(best.fun, problem.owners(estimate), noise, len(spec.keys))
+        test = goodness_of_fit(best.fun, owners, noise, len(spec.keys))
         result.fit_test = test
         sides = []
         if test.passed and spec.profiles:
@@ -395,8 +396,13 @@ def _unit_covariance(jac: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np
 
 
 def _statistics(problem: FitProblem, result: LocalOutcome, estimate: np.ndarray,
-                logs: np.ndarray) -> FitResult:
-    """Return the fit at ``result`` with standard errors, correlations and their warnings."""
+                logs: np.ndarray, owners: np.ndarray) -> FitResult:
+    """
+    Return the fit at ``result`` with standard errors, correlations and their warnings.
+
+    owners (m,): the piece of each residual; each piece's RMS comes from the residuals the
+    local fit ended with (no simulation of its own).
+    """
     keys = problem.spec.keys
     residuals = np.asarray(result.fun, dtype=float)
     m, n = np.asarray(result.jac).shape
@@ -431,7 +437,9 @@ def _statistics(problem: FitProblem, result: LocalOutcome, estimate: np.ndarray,
         high = np.where(logs, np.exp(theta + 1.96 * sigma_theta), estimate + 1.96 * stderr)
     return FitResult(keys=keys, estimate=estimate, stderr=stderr, low=low,
                      high=high, correlation=correlation, cost=float(result.cost),
-                     simulations=problem.simulations, piece_rms=problem.piece_rms(estimate),
+                     simulations=problem.simulations,
+                     piece_rms={int(p): float(np.sqrt(np.mean(residuals[owners == p] ** 2)))
+                                for p in np.unique(owners)},
                      window_simulations=problem.window_simulations,
                      warnings=warnings, success=bool(result.success),
                      message=str(result.message))

@@ -764,7 +764,6 @@ def kernel_cache_note(seconds: float) -> str:
     owned by root) numba keeps its cache in the user's cache directory instead (or in
     ``NUMBA_CACHE_DIR``); the line says so, and how to fill the cache once.
     """
-    from .integrator import advance_batch
     stats = advance_batch.stats
     loaded = bool(stats.cache_hits) and not stats.cache_misses
     path = Path(str(stats.cache_path)).resolve()
