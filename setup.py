@@ -15,10 +15,53 @@
 """Setup script of the ament_python package cone_feeder_sim."""
 
 from glob import glob
+import os
+from pathlib import Path
+import shutil
+import subprocess
+import sys
 
 from setuptools import find_packages, setup
+from setuptools.command.install import install
 
 package_name = 'cone_feeder_sim'
+#: Set to skip the compile after an install (the first start then compiles, about a minute).
+NO_COMPILE = 'CONE_FEEDER_SIM_NO_COMPILE'
+
+
+class InstallWithKernels(install):
+    """
+    Install, then leave numba's cache of the kernels warm in the installed package.
+
+    A colcon build (ament_python) and a ``setup.py install`` end here, so that the first
+    ``ros2 run cone_feeder_sim sim_node`` compiles nothing. Kernels cached in the source tree
+    (by scripts/setup_venv.sh) are copied first: numba keys its cache on the source file's
+    time stamp and size, which the install keeps, so only what they lack is compiled. A
+    failure to compile (numba missing at build time) is a warning: the first start then
+    compiles, as without this step. A staged install (``--root``: a wheel for pip, a Debian
+    package) is left alone: numba's cache would not match the files where they land.
+    """
+
+    def run(self) -> None:
+        """Run the install, then ``cone-feeder-sim compile`` against the installed package."""
+        super().run()
+        if os.environ.get(NO_COMPILE) or self.root:
+            return
+        source = Path(__file__).resolve().parent / package_name
+        target = Path(self.install_lib) / package_name
+        for cached in source.glob('**/__pycache__/*.nb[ic]'):
+            copy = target / cached.relative_to(source)
+            copy.parent.mkdir(exist_ok=True)
+            shutil.copy2(cached, copy)
+        env = dict(os.environ)
+        env['PYTHONPATH'] = os.pathsep.join(
+            [self.install_lib] + ([env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
+        done = subprocess.run([sys.executable, '-m', f'{package_name}.cli', 'compile'],
+                              cwd=self.install_lib, env=env, stderr=subprocess.STDOUT,
+                              check=False)
+        if done.returncode != 0:
+            self.warn('compiling the kernels failed; the first start will compile them '
+                      f'(set {NO_COMPILE}=1 to skip this step)')
 
 setup(
     name=package_name,
@@ -49,6 +92,7 @@ setup(
                 'weigher, with a ROS 2 node and MCAP logging.',
     license='Apache-2.0',
     tests_require=['pytest'],
+    cmdclass={'install': InstallWithKernels},
     entry_points={
         'console_scripts': [
             'cone-feeder-sim = cone_feeder_sim.cli:main',

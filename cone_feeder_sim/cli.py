@@ -351,7 +351,7 @@ def cmd_compile(err: TextIO) -> int:
     start = time.perf_counter()
     warm_up()
     warm_up_weigher()
-    err.write(kernel_cache_note(time.perf_counter() - start) + '\n')
+    err.write(kernel_cache_note(time.perf_counter() - start, hint=False) + '\n')
     return 0
 
 

@@ -756,13 +756,13 @@ def warm_up(model: ModelParams | None = None, batched: bool = False) -> None:
         advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
 
 
-def kernel_cache_note(seconds: float) -> str:
+def kernel_cache_note(seconds: float, hint: bool = True) -> str:
     """
     Return one line on the integration kernel: loaded from numba's cache or compiled, where.
 
     seconds: how long loading took. Where the package's folder cannot be written (an install
     owned by root) numba keeps its cache in the user's cache directory instead (or in
-    ``NUMBA_CACHE_DIR``); the line says so, and how to fill the cache once.
+    ``NUMBA_CACHE_DIR``); the line says so, and (``hint``) how to fill the cache once.
     """
     stats = advance_batch.stats
     loaded = bool(stats.cache_hits) and not stats.cache_misses
@@ -772,6 +772,6 @@ def kernel_cache_note(seconds: float) -> str:
     if not path.is_relative_to(Path(__file__).resolve().parent.parent):
         note += ", outside the package's folder: the user's cache directory or NUMBA_CACHE_DIR"
     note += ')'
-    if not loaded:
+    if hint and not loaded:
         note += '; run `cone-feeder-sim compile` once after installing, so no start compiles'
     return note

@@ -22,10 +22,11 @@ ament_index_python.get_package_prefix(), then <prefix>/lib/cone_feeder_sim/<exec
 config files and the launch file (`ros2 launch cone_feeder_sim sim.launch.py`) in its share
 directory.
 The installed node is started with the installed config and driven over ROS 2; the example
-controller runs beside it. The kernels that the README's set-up compiled in the source tree
-are copied into the install first (numba keys its cache on the source file's time stamp and
-size, which the build keeps), so that the node starts without compiling; where the source
-tree has none, the first start compiles them (about 60 s on a free core).
+controller runs beside it. The build leaves numba's cache warm in the install (setup.py's
+install step: the kernels the README's set-up compiled in the source tree are copied with the
+source, and whatever they lack is compiled), so the node's first start loads its kernels from
+the install's cache; where the source tree has none, the build compiles them (about a minute
+on a free core).
 """
 
 from collections.abc import Iterator
@@ -63,6 +64,10 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, An
     before = {p.name for p in ROOT.iterdir()}
     src = base / 'src' / PACKAGE
     shutil.copytree(ROOT, src, ignore=IGNORE)
+    for cached in (ROOT / PACKAGE).glob('**/__pycache__/*.nb[ic]'):  # what set-up compiled
+        copy = src / cached.relative_to(ROOT)
+        copy.parent.mkdir(exist_ok=True)
+        shutil.copy2(cached, copy)
     proc = subprocess.run(
         [sys.executable, '-m', 'colcon', '--log-base', str(base / 'log'), 'build',
          '--base-paths', str(base / 'src'), '--build-base', str(base / 'build'),
@@ -71,11 +76,8 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, An
     assert proc.returncode == 0, proc.stdout + proc.stderr
     new_in_repo = {p.name for p in ROOT.iterdir()} - before
     installed, = (base / 'install' / PACKAGE / 'lib').glob(f'python3*/site-packages/{PACKAGE}')
-    for cached in (ROOT / PACKAGE).glob('**/__pycache__/*.nb[ic]'):
-        target = installed / cached.relative_to(ROOT / PACKAGE)
-        target.parent.mkdir(exist_ok=True)
-        shutil.copy2(cached, target)
-    yield {'base': base, 'install': base / 'install', 'src': src, 'new_in_repo': new_in_repo}
+    yield {'base': base, 'install': base / 'install', 'src': src, 'new_in_repo': new_in_repo,
+           'installed': installed}
 
 
 def sourced_env(install: Path) -> dict[str, str]:
@@ -158,3 +160,7 @@ def test_ros2_run_lookup_finds_and_runs_the_installed_node(
             ctl.stop()
     assert status == 0, node.log()
     assert 'Traceback' not in node.log()
+    # the build left the kernels in the install's cache: the first start compiled nothing
+    cache = workspace['installed'].resolve() / 'physics' / '__pycache__'
+    assert 'numba kernels loaded from the cache in' in node.log(), node.log()
+    assert f'(cache: {cache})' in node.log(), node.log()
