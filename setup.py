@@ -63,6 +63,7 @@ class InstallWithKernels(install):
             self.warn('compiling the kernels failed; the first start will compile them '
                       f'(set {NO_COMPILE}=1 to skip this step)')
 
+
 setup(
     name=package_name,
     version='0.1.0',
