@@ -18,7 +18,8 @@ The rooms of the package import one way (doc/architecture.md).
 physics <- feeder <- formats, view <- report, sweep, rl, fit <- ros, cli: a module imports
 only from its own room and the rooms before it (ros uses rl in policy_controller only);
 physics imports no rclpy, mcap or yaml; nothing below ros imports rclpy or ROS message
-packages.
+packages; in ros, the ticker, the input handling and what they use are free of them too
+(their tests drive them without ROS).
 """
 
 import ast
@@ -43,6 +44,8 @@ ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'std_msgs', 'std_srvs', 'geometry_msg
                 'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'rosgraph_msgs',
                 'builtin_interfaces'}  # ament_index_python: an optional look-up of files
 MODULES = sorted(PACKAGE.rglob('*.py'))
+#: Modules of the ros room that import no ROS package, nor a module of ros that does.
+ROS_FREE = {'ros/ticker.py', 'ros/inputs.py', 'ros/pacing.py', 'ros/diagnostics.py'}
 
 
 def room(parts: tuple[str, ...]) -> str:
@@ -97,3 +100,13 @@ def test_imports_run_one_way(path: Path) -> None:
 
 def test_every_module_is_in_a_room() -> None:
     assert {room(p.relative_to(PACKAGE).parts) for p in MODULES} <= set(RANK)
+
+
+@pytest.mark.parametrize('name', sorted(ROS_FREE))
+def test_the_ticker_and_the_inputs_are_free_of_ros(name: str) -> None:
+    path = PACKAGE / name
+    for top, _ in imports(path):
+        assert top not in ROS_PACKAGES, f'{name} imports {top}'
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 1:  # a sibling in ros
+            assert f'ros/{node.module}.py' in ROS_FREE, f'{name} imports .{node.module}'

@@ -58,13 +58,13 @@ from typing import Any
 import numpy as np
 
 from .feed import check_feed_fits, draw_feed, FEED_LIMITS, FeedParams
-from ..errors import InputError, ParameterError, ScenarioError
+from ..errors import ConeFeederError, InputError, ParameterError, ScenarioError
 from ..physics.params import (
     check_integer, check_number, Limit, ModelParams, P_M, ProductParams, SolverParams)
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
     add_particles, advance, advance_many, as_points, check_positions, ExitEvents, Failure,
-    SimParams, SimState, StepResult, StepStats, warm_up, world_from_cone)
+    position_problems, SimParams, SimState, StepResult, StepStats, warm_up, world_from_cone)
 from ..weigher.combination import warm_up as warm_up_weigher
 from ..weigher.machine import check_machine, Pack, Weigher, WeigherParams, WeigherStats
 
@@ -77,6 +77,7 @@ __all__ = [
     'FeederEngine',
     'PieceSpec',
     'Refusal',
+    'SpawnOffer',
     'Reconfigure',
     'ResetRequest',
     'RotationCommand',
@@ -282,6 +283,27 @@ class Refusal:
     kind: str
     count: int
     reason: str
+
+
+@dataclass(frozen=True)
+class SpawnOffer:
+    """
+    What :meth:`FeederEngine.offer_spawn` did with a spawn of ``total`` positions.
+
+    invalid: the positions refused one by one (their count, why); excess: the valid ones
+    beyond feed.max_pieces; queue: the rest, refused by a full input queue (each None when
+    nothing was refused so).
+    """
+
+    total: int
+    invalid: Refusal | None = None
+    excess: Refusal | None = None
+    queue: Refusal | None = None
+
+    @property
+    def refusals(self) -> tuple[Refusal, ...]:
+        """Return the refusals, in the order above."""
+        return tuple(r for r in (self.invalid, self.excess, self.queue) if r is not None)
 
 
 @dataclass(frozen=True, eq=False)
@@ -555,9 +577,54 @@ class FeederEngine:
             velocities.setflags(write=False)
         return SpawnRequest(positions, velocities, products)
 
-    def command(self, omega: float) -> None:
-        """Queue a rotation command in rad/s; refuse a non-finite value."""
+    def command(self, omega: float) -> float:
+        """
+        Queue a rotation command in rad/s; refuse a non-finite value.
+
+        Returns the target it sets under the drive's speed limit in force now (omega clamped
+        to ``[-max_angular_velocity, max_angular_velocity]``), so that a caller can say
+        when a command was clamped; the tick applies the limit in force then.
+        """
         self.submit(RotationCommand(omega))
+        limit = self._drive.max_angular_velocity
+        return min(max(float(omega), -limit), limit)
+
+    def offer_spawn(self, positions: Any, velocities: Any = None) -> 'SpawnOffer':
+        """
+        Queue the valid part of a spawn at world positions (M, 3) (m); say what was refused.
+
+        Where :meth:`spawn` refuses a whole request for one bad position, this refuses
+        positions one by one: not finite, outside the cone, below its surface or above
+        ``spawn_max_height`` (the reason names their indices, at most five), then those
+        beyond ``feed.max_pieces`` (no cone holds them). What no longer fits when the spawn is
+        applied is refused then, in the tick's refusals. velocities (M, 3) (m/s) or None
+        (carried). A full input queue refuses the rest.
+        """
+        positions = as_points('spawn position', positions, finite=False)
+        total = positions.shape[0]
+        if velocities is not None:
+            velocities = as_points('spawn velocity', velocities, total)
+        invalid = excess = queue = None
+        valid, problems = position_problems(self._config.model, positions,
+                                            self._config.spawn_max_height)
+        if problems:
+            invalid = Refusal('spawn', len(problems), '; '.join(problems[:5])
+                              + (' ...' if len(problems) > 5 else ''))
+        positions = positions[valid]
+        velocities = None if velocities is None else velocities[valid]
+        limit = self._feed.max_pieces
+        if positions.shape[0] > limit:
+            count = positions.shape[0] - limit
+            excess = Refusal('spawn', count, f'{count} of {total} poses beyond feed.max_pieces '
+                             f'= {limit} pieces on the cone')
+            positions = positions[:limit]
+            velocities = None if velocities is None else velocities[:limit]
+        if positions.shape[0]:
+            try:
+                self.spawn(positions, velocities)
+            except ConeFeederError as exc:
+                queue = Refusal('spawn', positions.shape[0], str(exc))
+        return SpawnOffer(total, invalid, excess, queue)
 
     def spawn(self, positions: Any, velocities: Any = None,
               products: Sequence[ProductParams] | None = None) -> None:
@@ -573,6 +640,19 @@ class FeederEngine:
                     feed: FeedParams | None = None) -> None:
         """Queue new drive and/or feed parameters."""
         self.submit(Reconfigure(drive=drive, feed=feed))
+
+    def check_reconfigure(self, feed: FeedParams | None = None) -> None:
+        """
+        Raise what :meth:`reconfigure` would raise now, queueing nothing.
+
+        For a caller that must accept or refuse a change before it submits it (the node's
+        parameter callbacks): a feed that does not fit the cone, a full input queue.
+        """
+        if feed is not None:
+            check_feed_fits(self._config.model, feed)
+        if len(self._pending) >= MAX_PENDING_INPUTS:
+            raise InputError(f'Reconfigure refused: {MAX_PENDING_INPUTS} inputs are already '
+                             'waiting for the next tick')
 
     # ------------------------------------------------------------------ the tick
 

@@ -22,9 +22,10 @@ layouts: :mod:`cone_feeder_sim.formats.pointcloud`). Messages are plain mappings
 :mod:`cone_feeder_sim.formats.cdr` encodes; arrays are numpy arrays.
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 import math
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -51,6 +52,8 @@ __all__ = [
     'stamp',
     'stamp_ns',
     'states_message',
+    'TickMessages',
+    'TickView',
 ]
 
 # --------------------------------------------------------------------------- messages
@@ -346,3 +349,74 @@ class MarkerBuilder:
                 ) -> dict[str, Any]:
         """Return the whole scene: static markers, pieces and the cone angle line."""
         return {'markers': self.static + self.dynamic(head, angle, positions)}
+
+
+# --------------------------------------------------------------------------- a tick
+
+
+class TickView(Protocol):
+    """
+    What a tick shows (a :class:`~cone_feeder_sim.feeder.engine.TickResult` is one).
+
+    t (s) the end of the tick; ids (N,), positions (N, 3) (m), velocities (N, 3) (m/s),
+    masses (N,) (kg) of the pieces at t, world frame; exits during the tick; channel_mass
+    (channels,) cumulative kg; angle (rad) and omega (rad/s) of the cone; hoppers (heads,)
+    kg or None without a weigher; packs made in the tick; reset: whether it began with one.
+    """
+
+    t: float
+    ids: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    masses: np.ndarray
+    exits: ExitEvents
+    channel_mass: np.ndarray
+    angle: float
+    omega: float
+    hoppers: np.ndarray | None
+    packs: Sequence[Pack]
+    reset: bool
+
+
+class TickMessages:
+    """
+    The messages of one tick, in the order they are published: one builder for all.
+
+    The ROS node publishes them and the headless runner writes them to MCAP, so a live run
+    and a batch run carry the same messages in the same order. Calling it with a tick
+    returns ``(table topic, message)`` pairs: ``/clock`` (with ``clock``), particles,
+    particle_states, exit_events (ticks with exits), channel_mass, cone_state,
+    hopper_weights (with a weigher), pack_events (ticks with packs), markers (``schedule``:
+    ``markers_rate`` per simulated second, on a reset and the tick after it).
+    """
+
+    def __init__(self, model: ModelParams, frame_id: str, markers_rate: float, *,
+                 clock: bool = False, codec: CdrCodec | None = None) -> None:
+        """Build the static markers once; no markers sent yet."""
+        self.frame_id = frame_id
+        self.clock = clock
+        self.schedule = MarkerSchedule(markers_rate)
+        self._markers = MarkerBuilder(model, frame_id, codec)
+
+    def __call__(self, tick: TickView) -> list[tuple[str, dict[str, Any]]]:
+        """Return the tick's messages in publishing order."""
+        head = header(tick.t, self.frame_id)
+        out: list[tuple[str, dict[str, Any]]] = []
+        if self.clock:
+            out.append(('/clock', clock_message(tick.t)))
+        out.append(('particles', particles_message(head, tick.positions)))
+        out.append(('particle_states', states_message(
+            head, tick.ids, tick.positions, tick.velocities, tick.masses)))
+        if len(tick.exits):
+            out.append(('exit_events', exits_message(head, tick.exits)))
+        out.append(('channel_mass', channel_mass_message(tick.channel_mass)))
+        out.append(('cone_state', cone_state_message(head, tick.angle, tick.omega)))
+        if tick.hoppers is not None:
+            out.append(('hopper_weights', hopper_weights_message(tick.hoppers)))
+        if tick.packs:
+            out.append(('pack_events', packs_message(head, tuple(tick.packs))))
+        if self.schedule.due(tick.t, tick.reset):
+            out.append(('markers', self._markers.message(head, tick.angle, tick.positions)))
+        if tick.reset:
+            self.schedule.restart()
+        return out

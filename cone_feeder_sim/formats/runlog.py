@@ -45,9 +45,7 @@ from typing import Any
 import numpy as np
 
 from .mcap_writer import McapRecorder
-from .messages import (
-    channel_mass_message, cone_state_message, exits_message, header, hopper_weights_message,
-    MarkerBuilder, MarkerSchedule, packs_message, particles_message, stamp_ns, states_message)
+from .messages import stamp_ns, TickMessages
 from .run_recorder import END_METADATA_NAME, make_parent_dir
 from .topics import RUNNER_TOPICS, TOPICS
 from .. import __version__
@@ -59,8 +57,8 @@ from ..feeder.scenario import Scenario
 from ..physics.params import (
     CHANNEL_KEYS, INTERACTION_KEYS, MODEL_KEYS, ModelParams, P_M, PRODUCT_LIMITS,
     ProductParams, SolverParams)
-from ..physics.simulation import Failure, Simulator, StepResult
-from ..weigher.machine import Weigher
+from ..physics.simulation import ExitEvents, Failure, Simulator, StepResult
+from ..weigher.machine import Pack, Weigher
 
 __all__ = [
     'DEFAULT_RECORD_PATH',
@@ -78,6 +76,7 @@ __all__ = [
     'interaction_values',
     'model_parameter_values',
     'parameter_text',
+    'run_metadata',
 ]
 
 #: Name of the metadata record that describes a run.
@@ -262,6 +261,31 @@ def engine_input_from_event(event: Mapping[str, Any]) -> EngineInput:
 # --------------------------------------------------------------------------- the runner's recorder
 
 
+def run_metadata(values: Mapping[str, Any], source: str, topics: Mapping[str, str],
+                 input_topics: Iterable[str], **fields: str) -> dict[str, str]:
+    """
+    Return the ``cone_feeder_sim`` metadata of a run: the one layout of node and runner.
+
+    values: the run's parameters by name (each also a key of its own, as
+    :func:`parameter_text`, and all of them in ``parameters_json``); source: what made the
+    run (``sim_node``, ``cone-feeder-sim run``); topics: table name -> recorded topic;
+    input_topics: the recorded topics that were inputs of the run; fields: further keys
+    (the node's engine configuration, the runner's scenario), written last.
+    """
+    data = {name: parameter_text(value) for name, value in values.items()}
+    data.update({
+        'format': FORMAT_VERSION,
+        'version': __version__,
+        'source': source,
+        'parameters_json': json.dumps(to_jsonable(dict(values))),
+        'topics': json.dumps(dict(topics)),
+        'input_topics': json.dumps(sorted(input_topics)),
+        'created': datetime.datetime.now().astimezone().isoformat(timespec='seconds'),
+    })
+    data.update(fields)
+    return data
+
+
 def scenario_metadata(scenario: Scenario, source: str, topics: Mapping[str, str],
                       markers_rate: float, frame_id: str) -> dict[str, str]:
     """Return the ``cone_feeder_sim`` metadata of a headless run."""
@@ -279,22 +303,30 @@ def scenario_metadata(scenario: Scenario, source: str, topics: Mapping[str, str]
                        for f in dataclasses.fields(scenario.weigher)})
     values.update({'frame_id': frame_id, 'markers.rate': markers_rate,
                    'duration': scenario.duration, 'output_interval': scenario.output_interval})
-    data = {name: parameter_text(value) for name, value in values.items()}
-    data.update({
-        'format': FORMAT_VERSION,
-        'version': __version__,
-        'source': 'cone-feeder-sim run',
-        'scenario': source,
-        'rotation': json.dumps([[float(t), float(w)] for t, w in zip(
+    return run_metadata(
+        values, 'cone-feeder-sim run', topics, (), scenario=source,
+        rotation=json.dumps([[float(t), float(w)] for t, w in zip(
             scenario.rotation.times, scenario.rotation.omegas)]),
-        'particles': json.dumps(to_jsonable(scenario.particles)),
-        'parameters_json': json.dumps(to_jsonable(values)),
-        'topics': json.dumps(dict(topics)),
-        'input_topics': '[]',
-        'seed': str(scenario.feed_seed) if scenario.feed is not None else '',
-        'created': datetime.datetime.now().astimezone().isoformat(timespec='seconds'),
-    })
-    return data
+        particles=json.dumps(to_jsonable(scenario.particles)),
+        seed=str(scenario.feed_seed) if scenario.feed is not None else '')
+
+
+@dataclasses.dataclass(frozen=True)
+class _Interval:
+    """A runner interval as :class:`~.messages.TickView` reads it (no reset)."""
+
+    t: float
+    ids: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    masses: np.ndarray
+    exits: ExitEvents
+    channel_mass: np.ndarray
+    angle: float
+    omega: float
+    hoppers: np.ndarray | None
+    packs: tuple[Pack, ...]
+    reset: bool = False
 
 
 class ScenarioRecorder:
@@ -329,9 +361,7 @@ class ScenarioRecorder:
         except BaseException:
             self._recorder.close()
             raise
-        self._frame = frame_id
-        self._markers = MarkerBuilder(scenario.model, frame_id)
-        self._schedule = MarkerSchedule(markers_rate)
+        self._messages = TickMessages(scenario.model, frame_id, markers_rate)
         self._channel_mass = np.zeros(scenario.model.channels.count)
         self._intervals = 0
         self._exits = 0
@@ -346,30 +376,25 @@ class ScenarioRecorder:
         self._recorder.write(self._names[name], TOPICS[name].type_name, message, log_time)
 
     def __call__(self, t: float, sim: Simulator, step: StepResult) -> None:
-        """Write the messages of the interval that ended at t (s)."""
-        t_ns = stamp_ns(t)
-        head = header(t, self._frame)
+        """Write the messages of the interval that ended at t (s), as the node orders them."""
         q, qdot, _ = sim.world()
         state = sim.state
-        self._write('particles', particles_message(head, q), t_ns)
-        self._write('particle_states', states_message(
-            head, state.ids, q, qdot, state.products[:, P_M]), t_ns)
         exits = step.exits
         if len(exits):
             np.add.at(self._channel_mass, exits.channel - 1, exits.mass)
-            self._write('exit_events', exits_message(head, exits), t_ns)
             self._exits += len(exits)
-        self._write('channel_mass', channel_mass_message(self._channel_mass.copy()), t_ns)
-        self._write('cone_state', cone_state_message(head, state.angle, sim.omega()), t_ns)
-        if self._schedule.due(t):
-            self._write('markers', self._markers.message(head, state.angle, q), t_ns)
+        packs: tuple[Pack, ...] = ()
+        hoppers = None
         if self._weigher is not None:
-            self._write('hopper_weights', hopper_weights_message(
-                self._weigher.hopper_readings()), t_ns)
-            packs = self._weigher.packs[self._packs_written:]
-            if packs:
-                self._write('pack_events', packs_message(head, tuple(packs)), t_ns)
-                self._packs_written += len(packs)
+            hoppers = self._weigher.hopper_readings()
+            packs = tuple(self._weigher.packs[self._packs_written:])
+            self._packs_written += len(packs)
+        interval = _Interval(t, state.ids, q, qdot, state.products[:, P_M], exits,
+                             self._channel_mass.copy(), state.angle, sim.omega(), hoppers,
+                             packs)
+        t_ns = stamp_ns(t)
+        for name, message in self._messages(interval):
+            self._write(name, message, t_ns)
         self._intervals += 1
         self._t = t
 

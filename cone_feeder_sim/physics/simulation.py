@@ -204,11 +204,13 @@ def cone_from_world(q: np.ndarray, qdot: np.ndarray, q_d: np.ndarray, angle: flo
     return np.hstack([x, v, rotate_z(q_d, -angle)])
 
 
-def as_points(name: str, values: object, count: int | None = None) -> np.ndarray:
+def as_points(name: str, values: object, count: int | None = None, *,
+              finite: bool = True) -> np.ndarray:
     """
     Return values as a finite (M, 3) float64 array, or raise ScenarioError naming them.
 
-    A single point of shape (3,) is accepted as (1, 3); count, if given, is the required M.
+    A single point of shape (3,) is accepted as (1, 3); count, if given, is the required M;
+    ``finite=False`` lets non-finite points through (for a caller that screens them).
     """
     try:
         arr = np.array(values, dtype=np.float64)
@@ -219,7 +221,7 @@ def as_points(name: str, values: object, count: int | None = None) -> np.ndarray
     if arr.ndim != 2 or arr.shape[1] != 3 or (count is not None and arr.shape[0] != count):
         want = f'({count}, 3)' if count is not None else '(M, 3)'
         raise ScenarioError(f'{name} must have shape {want}, got {arr.shape}')
-    bad = ~np.all(np.isfinite(arr), axis=1)
+    bad = ~np.all(np.isfinite(arr), axis=1) if finite else np.zeros(0, dtype=np.bool_)
     if np.any(bad):
         i = int(np.argmax(bad))
         raise ScenarioError(f'{name}[{i}] is not finite: {arr[i].tolist()}')

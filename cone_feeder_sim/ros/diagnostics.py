@@ -26,10 +26,12 @@ from typing import Any
 
 from .pacing import Pacer
 from ..feeder.engine import FeederEngine, TickResult
+from ..formats.messages import stamp
 from ..formats.run_recorder import RunRecorder
 from ..weigher.machine import WeigherStats
 
-__all__ = ['DiagnosticsWindow', 'recording_status', 'simulation_status', 'weigher_status']
+__all__ = ['diagnostics_message', 'DiagnosticsWindow', 'recording_status', 'RunTotals',
+           'simulation_status', 'weigher_status']
 
 #: The hardware_id of every status.
 HARDWARE_ID = 'cone_feeder'
@@ -214,3 +216,23 @@ def simulation_status(node: str, window: DiagnosticsWindow, now: float, engine: 
         'drive mode': res.mode if res is not None else 'not started',
     }
     return _status(level, f'{node}: simulation', message, values)
+
+
+def diagnostics_message(node: str, window: DiagnosticsWindow, now: float,
+                        engine: FeederEngine, pacer: Pacer, paused: bool, totals: 'RunTotals',
+                        recorder: RunRecorder | None, recording_error: str | None,
+                        t: float) -> dict[str, Any]:
+    """
+    Return the node's diagnostic_msgs/DiagnosticArray (a mapping) at wall time ``now``.
+
+    Statuses: the simulation over ``window``, the recording, and the weigher when there is
+    one; t (s): the stamp, the time of the last published tick.
+    """
+    res = totals.last_tick
+    statuses = [
+        simulation_status(node, window, now, engine, pacer, paused, res, totals.exits,
+                          totals.failures, totals.refused),
+        recording_status(node, recorder, recording_error)]
+    if res is not None and res.weigher_stats is not None:
+        statuses.append(weigher_status(node, res.weigher_stats))
+    return {'header': {'stamp': stamp(t), 'frame_id': ''}, 'status': statuses}

@@ -51,13 +51,12 @@ import sys
 from typing import Any
 
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Float64, Float64MultiArray
 
-from .parameters import declare, init_or_exit, ParamSpec, warn_unknown_parameters
+from .guarded_node import run_node
+from .parameters import declare, ParamSpec, warn_unknown_parameters
 from .qos import rclpy_qos
 from ..errors import ParameterError
 from ..formats.pointcloud import cloud_points
@@ -213,26 +212,7 @@ class ExampleController(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Run the controller until shut down; return the process exit status."""
-    if not init_or_exit(args, 'example_controller'):
-        return 1
-    node = None
-    status = 0
-    try:
-        node = ExampleController()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ParameterError as exc:
-        rclpy.logging.get_logger('example_controller').fatal(f'cannot start: {exc}')
-        status = 1
-    except Exception:  # noqa: B902 - only to tell a shutdown race from a real error
-        if rclpy.ok():
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    return run_node(ExampleController, 'example_controller', args)
 
 
 if __name__ == '__main__':

@@ -26,17 +26,16 @@ configuration; they need no ROS.
 from dataclasses import dataclass, fields, replace
 import difflib
 from functools import cache
-import sys
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-import rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..errors import ParameterError
+from ..errors import ConeFeederError, ParameterError
 from ..feeder.engine import (
-    DriveParams, ENGINE_LIMITS, EngineConfig, FeedParams, pattern_from_flat, PieceSpec)
+    DriveParams, ENGINE_LIMITS, EngineConfig, FeederEngine, FeedParams, pattern_from_flat,
+    PieceSpec)
 from ..formats.mcap_writer import COMPRESSIONS
 from ..formats.parameter_file import config_dir, load_weigher_params
 from ..formats.runlog import DEFAULT_RECORD_PATH, model_parameter_values
@@ -52,9 +51,9 @@ __all__ = [
     'LIVE_PARAMETERS',
     'NODE_LIMITS',
     'ParamSpec',
+    'parameter_problem',
     'RUN_PARAMETERS',
     'declare',
-    'init_or_exit',
     'warn_unknown_parameters',
     'drive_from_values',
     'engine_config_from_values',
@@ -116,6 +115,34 @@ def changes_the_run(name: str) -> bool:
     return name in RUN_PARAMETERS or name.startswith('feed.')
 
 
+def parameter_problem(values: dict[str, Any], parameters: list[Parameter],
+                      engine: FeederEngine, resimulating: bool) -> str | None:
+    """
+    Return why a run-time change of ``parameters`` is refused, or None to accept it.
+
+    values: the node's parameter values before the change. While re-simulating, what
+    changes the run comes from the recording. A change of the drive or the feed must make a
+    valid drive, and the engine must take it (:meth:`FeederEngine.check_reconfigure`: a
+    feed that fits the cone, room in its input queue).
+    """
+    run = [p.name for p in parameters if changes_the_run(p.name)]
+    if not run:
+        return None
+    if resimulating:
+        return (f're-simulating a recording: {", ".join(run)} come from the recording until '
+                'its end')
+    values = dict(values)
+    for param in parameters:
+        if param.name in values:
+            values[param.name] = param.value
+    try:
+        drive_from_values(values)
+        engine.check_reconfigure(feed=feed_from_values(values))
+    except ConeFeederError as exc:
+        return str(exc)
+    return None
+
+
 @dataclass(frozen=True)
 class ParamSpec:
     """
@@ -161,21 +188,6 @@ class ParamSpec:
                 desc.floating_point_range = [FloatingPointRange(
                     from_value=float(self.limit.lo), to_value=float(self.limit.hi), step=0.0)]
         return desc
-
-
-def init_or_exit(args: list[str] | None, name: str) -> bool:
-    """
-    Initialise rclpy; on a bad command line or parameter file, print one line and say no.
-
-    rcl reports an unparsable ``--params-file`` by raising from ``rclpy.init``; a node's
-    ``main`` returns 1 when this returns False, with no traceback.
-    """
-    try:
-        rclpy.init(args=args)
-    except RuntimeError as exc:  # rclpy's RCLError
-        sys.stderr.write(f'[FATAL] [{name}]: cannot start: {exc}\n')
-        return False
-    return True
 
 
 def warn_unknown_parameters(node: Node) -> list[str]:

@@ -38,15 +38,14 @@ import sys
 from typing import Any
 
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, PointCloud2
 from std_msgs.msg import Float64, Float64MultiArray
 
-from .parameters import declare, init_or_exit, ParamSpec, warn_unknown_parameters
+from .guarded_node import run_node
+from .parameters import declare, ParamSpec, warn_unknown_parameters
 from .qos import rclpy_qos
-from ..errors import ConeFeederError, ParameterError
+from ..errors import ParameterError
 from ..formats.pointcloud import cloud_points
 from ..formats.topics import TOPICS
 from ..physics.simulation import cone_from_world
@@ -182,26 +181,7 @@ def main(args: list[str] | None = None) -> int:
         print(f'policy_controller needs the RL extra (missing module {MISSING!r}): pip '
               "install 'cone_feeder_sim[rl]'", file=sys.stderr)
         return 1
-    if not init_or_exit(args, 'policy_controller'):
-        return 1
-    node = None
-    status = 0
-    try:
-        node = PolicyController()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ConeFeederError as exc:
-        rclpy.logging.get_logger('policy_controller').fatal(f'cannot start: {exc}')
-        status = 1
-    except Exception:  # noqa: B902 - only to tell a shutdown race from a real error
-        if rclpy.ok():
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    return run_node(PolicyController, 'policy_controller', args)
 
 
 if __name__ == '__main__':

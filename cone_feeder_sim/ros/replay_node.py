@@ -51,14 +51,12 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMessage
 
-from .guarded_node import GuardedNode
-from .parameters import declare, init_or_exit, ParamSpec, warn_unknown_parameters
+from .guarded_node import GuardedNode, run_node
+from .parameters import declare, ParamSpec, warn_unknown_parameters
 from .qos import rclpy_qos
 from ..errors import ConeFeederError, ParameterError
 from ..formats.mcap_reader import (
@@ -314,23 +312,8 @@ class ReplayNode(GuardedNode):
 
 def main(args: list[str] | None = None) -> int:
     """Replay until the end (or until shut down); return the process exit status."""
-    if not init_or_exit(args, NODE_NAME):
-        return 1
-    node = None
-    status = 0
-    try:
-        node = ReplayNode()
-        rclpy.spin_until_future_complete(node, node.done)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ConeFeederError, ParameterException) as exc:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot replay: {exc}')
-        status = 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    return run_node(ReplayNode, NODE_NAME, args, refusal='cannot replay',
+                    spin=lambda node: rclpy.spin_until_future_complete(node, node.done))
 
 
 if __name__ == '__main__':

@@ -26,13 +26,15 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import RecordingError
+from ..feeder.engine import FeederEngine
 from ..formats.cdr import CdrError, default_codec
 from ..formats.mcap_reader import (
     open_recording, parse_run_source, RecordedMessage, RunSource)
-from ..formats.runlog import END_METADATA_NAME, FORMAT_VERSION, METADATA_NAME
+from ..formats.runlog import (
+    END_METADATA_NAME, engine_input_from_event, FORMAT_VERSION, INPUT_EVENTS, METADATA_NAME)
 from ..physics.params import InteractionParams
 
-__all__ = ['ResimPlan', 'load_resim_plan']
+__all__ = ['load_resim_plan', 'recorded_parameter', 'ResimPlan', 'Resimulation']
 
 
 @dataclass(frozen=True)
@@ -111,6 +113,60 @@ def load_resim_plan(source: RunSource) -> ResimPlan:
 
 #: Parameters that recordings made before they existed lack, with the value those runs had:
 #: they were coupled exactly.
+class Resimulation:
+    """
+    A re-simulation under way: the plan, whether it still runs, what each tick gets.
+
+    It runs from the node's start until the recorded number of ticks is done
+    (:meth:`finish`); meanwhile live inputs are refused and the recorded ones submitted.
+    """
+
+    def __init__(self, plan: ResimPlan) -> None:
+        """Start re-simulating ``plan``."""
+        self.plan = plan
+        self.active = True
+
+    def notes(self, engine_config: str) -> list[tuple[str, str]]:
+        """Return the log lines (level, text) of the start, given the engine's config JSON."""
+        plan = self.plan
+        notes = []
+        if plan.engine_config and plan.engine_config != engine_config:
+            notes.append(('warning', f'the engine configuration built from the parameters of '
+                          f'{plan.path} differs from the recorded one (recorded by another '
+                          'version?): the re-simulation may differ'))
+        if plan.problem:
+            notes.append(('warning', f'{plan.path} is incomplete ({plan.problem}): '
+                          f're-simulating its {plan.ticks} readable ticks'))
+        count = sum(len(v) for v in plan.events.values())
+        notes.append(('info', f're-simulating {plan.path}: {plan.ticks} ticks, {count} recorded '
+                      'events; parameters, initial pieces and inputs come from the recording'))
+        return notes
+
+    def remaining(self, tick_index: int) -> int:
+        """Return how many recorded ticks are left after ``tick_index`` ticks."""
+        return self.plan.ticks - tick_index
+
+    def submit_inputs(self, engine: FeederEngine) -> None:
+        """Submit the recorded inputs of the engine's next tick (on the ticking thread)."""
+        if self.active:
+            for event in self.plan.events.get(engine.tick_index, ()):
+                if event.get('event') in INPUT_EVENTS:
+                    engine.submit(engine_input_from_event(event))
+
+    def marker_rates(self, index: int) -> list[tuple[int, float]]:
+        """Return the recorded marker rate changes of tick ``index`` as (index, rate)."""
+        return [(index, float(event['values']['markers.rate']))
+                for event in self.plan.events.get(index, ())
+                if event.get('event') == 'parameters'
+                and 'markers.rate' in event.get('values', {})]
+
+    def finish(self, t: float) -> str:
+        """End the re-simulation at simulation time t (s); return the log line."""
+        self.active = False
+        return (f're-simulation of {self.plan.path} done after {self.plan.ticks} ticks (t = '
+                f'{t:.6f} s); paused: resume with ~/pause false to go on live')
+
+
 BEFORE_THEY_EXISTED: dict[str, Any] = {
     'interactions.coupling': 'exact',
     'interactions.coupling_tolerance': InteractionParams().coupling_tolerance}

@@ -436,6 +436,47 @@ def test_the_input_queue_is_bounded() -> None:
     eng.command(1.0)  # the queue is empty again after the tick
 
 
+def test_a_full_queue_refuses_a_reconfiguration_before_it_is_submitted() -> None:
+    eng = engine()
+    eng.check_reconfigure(feed=FeedParams(rate=3.0))  # room, and a feed that fits
+    with pytest.raises(ParameterError, match='inside the cone'):
+        eng.check_reconfigure(feed=FeedParams(rho_max=1.0))
+    for k in range(MAX_PENDING_INPUTS):
+        eng.command(float(k % 5))
+    with pytest.raises(InputError, match='already waiting'):
+        eng.check_reconfigure()
+    assert len(eng.pending) == MAX_PENDING_INPUTS  # the check queued nothing
+
+
+def test_a_command_says_the_target_it_gets_under_the_speed_limit() -> None:
+    eng = engine()  # max_angular_velocity 10 rad/s
+    assert eng.command(4.0) == 4.0
+    assert eng.command(25.0) == 10.0 and eng.command(-25.0) == -10.0
+    eng.tick()
+    assert eng.tick().target_omega == -10.0  # the tick applies the same clamp
+
+
+def test_an_offered_spawn_takes_the_valid_poses_and_refuses_the_rest() -> None:
+    eng = engine(feed=FeedParams(rate=0.0, max_pieces=3), spawn_max_height=0.5)
+    good = [resting(0.05 * math.cos(a), 0.05 * math.sin(a)) for a in np.linspace(0, 6, 5)]
+    positions = np.array([good[0], (0.3, 0.0, 0.01), good[1], (0.1, np.nan, 0.05), good[2],
+                          (0.05, 0.0, 0.6), good[3], good[4]])
+    offer = eng.offer_spawn(positions, np.zeros_like(positions))
+    assert offer.total == 8
+    assert offer.invalid.count == 3
+    for fragment in ('position[1]', 'outside the cone', 'position[3]', 'not finite',
+                     'position[5]', 'above the highest start 0.5 m'):
+        assert fragment in offer.invalid.reason
+    assert offer.excess.count == 2 and 'feed.max_pieces = 3' in offer.excess.reason
+    assert offer.queue is None and offer.refusals == (offer.invalid, offer.excess)
+    request, = eng.pending
+    np.testing.assert_array_equal(request.positions, np.array(good[:3]))
+    assert eng.tick().count == 3
+    # nothing valid: nothing queued, all refused
+    offer = eng.offer_spawn([[0.3, 0.0, 0.01]])
+    assert offer.invalid.count == 1 and offer.excess is None and eng.pending == ()
+
+
 def test_spawns_above_the_highest_start_are_refused() -> None:
     eng = engine(spawn_max_height=0.5)
     with pytest.raises(ScenarioError, match='above the highest start 0.5 m'):

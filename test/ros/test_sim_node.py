@@ -152,13 +152,13 @@ def test_invalid_runtime_parameters_are_refused_with_a_reason(
 
 def test_runtime_parameters_take_effect(ros: Ros) -> None:
     sim = ros.sim(real_time_factor=1.0)
-    assert sim._tick_timer.timer_period_ns == 20_000_000
+    assert sim.tick_timer_period_ns == 20_000_000
     results = sim.set_parameters([
         Parameter('real_time_factor', value=2.0), Parameter('feed.rate', value=7.0),
         Parameter('max_angular_velocity', value=3.0),
         Parameter('open_loop_pattern', value=[1.0, 2.0])])
     assert all(r.successful for r in results)
-    assert sim._tick_timer.timer_period_ns == 10_000_000
+    assert sim.tick_timer_period_ns == 10_000_000
     pause(ros, sim)
     step(ros, sim)
     assert sim.engine.feed.rate == 7.0
@@ -167,7 +167,7 @@ def test_runtime_parameters_take_effect(ros: Ros) -> None:
     assert sim.last_tick.target_omega == 2.0
     # 0: as fast as possible
     assert sim.set_parameters([Parameter('real_time_factor', value=0.0)])[0].successful
-    assert sim._pacer.period == 0.0  # the worker chains its hand-overs
+    assert sim.ticker.pacer.period == 0.0  # the worker chains its hand-overs
     sim.set_paused(False)
     index = sim.engine.tick_index
     assert ros.spin_until(lambda: sim.engine.tick_index >= index + 20)
@@ -465,7 +465,7 @@ def test_a_short_stall_is_caught_up(ros: Ros) -> None:
     # the node makes the 0.5 s up: simulated time gets back to the wall clock
     assert ros.spin_until(
         lambda: sim.engine.t - sim0 >= time.perf_counter() - wall0 - 0.1, 60.0)
-    assert sim._window.given_up == 0.0
+    assert sim.ticker.window.given_up == 0.0
 
 
 def test_a_long_stall_is_given_up_not_bunched(ros: Ros) -> None:
@@ -479,7 +479,7 @@ def test_a_long_stall_is_given_up_not_bunched(ros: Ros) -> None:
     elapsed = time.monotonic() - start
     # at most catch_up worth of extra ticks (5), then one per period
     assert sim.engine.tick_index - index <= (elapsed + 0.1) / 0.02 + 2
-    assert sim._window.given_up >= 0.3
+    assert sim.ticker.window.given_up >= 0.3
 
 
 def test_the_executor_runs_while_a_tick_does(ros: Ros) -> None:

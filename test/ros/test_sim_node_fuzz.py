@@ -22,6 +22,7 @@ mass on the cone, exited and failed must add up to the mass put on it.
 """
 
 from collections.abc import Callable
+from functools import partial
 import math
 from pathlib import Path
 import random
@@ -101,10 +102,10 @@ def test_the_node_survives_random_input(tmp_path: Path, seed: int) -> None:
                 callback(data)
 
         actions: list[Callable[[], Any]] = [
-            lambda: send(cmd, sim._on_rotation_cmd, float_bytes(rng)),
-            lambda: send(cmd, sim._on_rotation_cmd, garbage(rng)),
-            lambda: send(spawn, sim._on_spawn, pose_array_bytes(rng)),
-            lambda: send(spawn, sim._on_spawn, garbage(rng)),
+            lambda: send(cmd, partial(sim.inject, 'rotation_cmd'), float_bytes(rng)),
+            lambda: send(cmd, partial(sim.inject, 'rotation_cmd'), garbage(rng)),
+            lambda: send(spawn, partial(sim.inject, 'spawn'), pose_array_bytes(rng)),
+            lambda: send(spawn, partial(sim.inject, 'spawn'), garbage(rng)),
             lambda: clients['step'].call_async(Trigger.Request()),
             lambda: clients['pause'].call_async(SetBool.Request(data=rng.random() < 0.3)),
             lambda: clients['reset'].call_async(Trigger.Request()) if rng.random() < 0.1

@@ -364,7 +364,7 @@ def test_a_split_run_is_read_by_rosbags_and_resimulated_exactly(tmp_path: Path) 
         drive(first, sim, 160)
         ticks = sim.engine.tick_index
         sim.close_recording()
-        parts = sim._recorder.paths
+        parts = sim.recording.paths
     finally:
         first.close()
     assert len(parts) >= 3
@@ -392,9 +392,9 @@ def test_a_vanished_directory_stops_the_recording_not_the_simulation(
     statuses: list[Any] = []
     ros.client.create_subscription(DiagnosticArray, '/diagnostics',
                                    lambda msg: statuses.extend(msg.status), 10)
-    assert ros.spin_until(lambda: len(sim._recorder.paths) >= 3, 60.0)
+    assert ros.spin_until(lambda: len(sim.recording.paths) >= 3, 60.0)
     folder.rename(tmp_path / 'moved')
-    assert ros.spin_until(lambda: sim._recording_error is not None, 60.0)
+    assert ros.spin_until(lambda: sim.recording.error is not None, 60.0)
     ticks = sim.engine.tick_index
     assert ros.spin_until(lambda: sim.engine.tick_index > ticks + 50, 60.0)  # goes on
     assert ros.spin_until(lambda: any(
