@@ -61,6 +61,13 @@ class GuardedNode(Node):
         """Declare parameters and create the node's handles; overridden by each node."""
         raise NotImplementedError
 
+    def log_at_exit(self, level: str, text: str) -> None:
+        """Log at ``level`` also at shutdown: after a signal the context, and /rosout, are gone."""
+        if self.context.ok():
+            getattr(self.get_logger(), level)(text)
+        else:
+            sys.stderr.write(f'[{level.upper()}] [{self.get_name()}]: {text}\n')
+
 
 def init_or_exit(args: list[str] | None, name: str) -> bool:
     """

@@ -54,6 +54,7 @@ __all__ = [
     'parameter_problem',
     'RUN_PARAMETERS',
     'declare',
+    'declare_recorded',
     'warn_unknown_parameters',
     'drive_from_values',
     'engine_config_from_values',
@@ -214,6 +215,21 @@ def declare(node: Node, spec: ParamSpec, value: Any = None, **kwargs: Any) -> Pa
     """Declare ``spec`` on ``node`` (with ``value`` instead of the default, if given)."""
     return node.declare_parameter(spec.name, spec.default if value is None else value,
                                   spec.descriptor(), **kwargs)
+
+
+def declare_recorded(node: Node, spec: ParamSpec, recorded: tuple[bool, Any]) -> Parameter:
+    """
+    Declare ``spec`` while re-simulating: the recorded value over a given one.
+
+    recorded: (found, value) of the parameter in the recording. Parameters that do not
+    change the simulation (LIVE_PARAMETERS) and those not recorded are declared as usual.
+    """
+    found, value = recorded
+    if not found or spec.name in LIVE_PARAMETERS:
+        return declare(node, spec)
+    if value is None or value == []:
+        value = spec.type_()  # an empty array: declared without a value, as '[]' does
+    return declare(node, spec, value, ignore_override=True)
 
 
 _MODEL_DESCRIPTIONS = {

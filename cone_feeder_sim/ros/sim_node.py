@@ -20,17 +20,12 @@ config/sim_node.yaml``. doc/sim_node.md is the reference: topics, QoS and point 
 input handling, services, parameters, time and recording.
 
 All physics, the drive, the feed and every rule on inputs live in
-:class:`~cone_feeder_sim.feeder.engine.FeederEngine`; the node composes helpers that take it
-and own their handles, as rclpy's own ``Node`` does:
-
-- :class:`~.outputs.Outputs`: topics, publishers, raw subscriptions, message hooks;
-- :class:`~.inputs.Inputs`: received bytes to engine input, and the refusal throttle;
-- :class:`~.ticker.Ticker`: the ticks on a worker thread, paced by the steady clock;
-- :class:`~cone_feeder_sim.formats.messages.TickMessages`: a tick's messages (the headless
-  runner writes the same);
-- :class:`~.recording.NodeRecording`: the MCAP file of the run;
-- :class:`~.resim.Resimulation`: re-simulation of a recording (``replay_commands``);
-- :func:`~.parameters.parameter_problem` and :func:`~.diagnostics.diagnostics_message`.
+:class:`~cone_feeder_sim.feeder.engine.FeederEngine`. The node composes helpers that take it
+or the engine and own their handles, as rclpy's own ``Node`` does (doc/sim_node.md lists
+them): :class:`~.outputs.Outputs` (topics, hooks), :class:`~.inputs.Inputs` (received bytes to
+engine input), :class:`~.ticker.Ticker` (ticks on a worker thread, paced),
+:class:`~cone_feeder_sim.formats.messages.TickMessages` (a tick's messages, as the headless
+runner writes them), :class:`~.recording.NodeRecording` and :class:`~.resim.Resimulation`.
 
 Inputs (commands, spawns, resets, parameter changes of the drive and feed) are applied at
 the start of the next tick; every input the engine applied is published on ``~/events``
@@ -54,8 +49,8 @@ from .inputs import Inputs, RefusalThrottle
 from .outputs import MAX_RECORDED_INPUT_BYTES, MessageHook, Outputs, TopicInfo
 from .pacing import Pacer
 from .parameters import (
-    declare, drive_from_values, DRIVE_PARAMETERS, engine_config_from_values, feed_from_values,
-    LIVE_PARAMETERS, model_from_values, parameter_problem, parameter_specs, ParamSpec,
+    declare, declare_recorded, drive_from_values, DRIVE_PARAMETERS, engine_config_from_values,
+    feed_from_values, model_from_values, parameter_problem, parameter_specs, ParamSpec,
     warn_unknown_parameters)
 from .recording import node_metadata, NodeRecording
 from .resim import load_resim_plan, recorded_parameter, Resimulation
@@ -169,13 +164,9 @@ class SimNode(GuardedNode):
 
     def _declare(self, spec: ParamSpec) -> Parameter:
         """Declare a parameter; while re-simulating, take recorded values over given ones."""
-        found, value = (False, None) if self._resim is None else recorded_parameter(
-            self._resim.plan, spec.name)
-        if not found or spec.name in LIVE_PARAMETERS:
+        if self._resim is None:
             return declare(self, spec)
-        if value is None or value == []:
-            value = spec.type_()  # an empty array: declared without a value, as '[]' does
-        return declare(self, spec, value, ignore_override=True)
+        return declare_recorded(self, spec, recorded_parameter(self._resim.plan, spec.name))
 
     def _values(self) -> dict[str, Any]:
         # get_parameter_or: an empty list in a parameter file leaves an array NOT_SET
@@ -264,11 +255,7 @@ class SimNode(GuardedNode):
             'exits': str(self._totals.exits), 'failures': str(self._totals.failures),
             'refused_inputs': str(self._totals.refused)})
         if line is not None:
-            level, text = line
-            if self.context.ok():
-                getattr(self.get_logger(), level)(text)
-            else:  # after a signal the context is gone and /rosout with it
-                sys.stderr.write(f'[{level.upper()}] [{self.get_name()}]: {text}\n')
+            self.log_at_exit(*line)
 
     def destroy_node(self) -> None:
         """Finish the running tick and the recording, then destroy the node's handles."""
@@ -438,7 +425,9 @@ class SimNode(GuardedNode):
         self._ticker.start(limit)
 
     def _on_timer(self) -> None:
-        if not self._ticker.busy and not self._paused:
+        if self._ticker.busy:
+            self._on_job_done()  # a finished job whose wake-up has not been served yet
+        elif not self._paused:
             self._start_ticks()
 
     def _on_job_done(self) -> None:

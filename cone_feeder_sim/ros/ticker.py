@@ -58,7 +58,8 @@ class Ticker:
     """
     Runs ``engine``'s ticks on a worker thread, paced by ``pacer`` (see the module docs).
 
-    done: called on the worker thread after each job (the node triggers a guard condition);
+    done: called after each job, once its ticks can be collected (on the worker thread; the
+    node triggers a guard condition);
     before_tick: called before each tick on the thread that runs it (re-simulation submits
     the recorded inputs of the tick there); clock: the steady wall clock (s).
     """
@@ -115,18 +116,18 @@ class Ticker:
         if count <= 0:
             return False
         self._job = self._worker.submit(self._work, count, begin + self.pacer.period)
+        # once the job's result is set (not from inside the job: a collect() woken before
+        # the future is done would leave the job uncollected and the node stalled)
+        self._job.add_done_callback(lambda _: self._done())
         return True
 
     def _work(self, count: int, deadline: float) -> Ticks:
         """Run up to ``count`` ticks, stopping after ``deadline`` (worker thread)."""
         results = []
-        try:
-            for _ in range(count):
-                results.append(self.tick_once())
-                if self._clock() >= deadline:
-                    break
-        finally:
-            self._done()
+        for _ in range(count):
+            results.append(self.tick_once())
+            if self._clock() >= deadline:
+                break
         return results
 
     def tick_once(self) -> tuple[TickResult, float]:

@@ -189,3 +189,28 @@ def test_a_failed_tick_is_raised_by_finish_and_done_is_still_called(clock: FakeC
     finally:
         tick.shutdown()
     assert tick.finish() == []  # nothing running after the shutdown
+
+
+def test_done_is_called_when_the_ticks_can_be_collected(clock: FakeClock) -> None:
+    # the node collects when woken: a wake-up before the job's result is set would leave
+    # the job uncollected, and the node would never start another
+    engine = FakeEngine(clock)
+    seen: list[Any] = []
+    woken = threading.Event()
+    tick: Ticker
+
+    def done() -> None:
+        seen.append(tick.collect())
+        woken.set()
+
+    tick = Ticker(engine, Pacer(DT, 1.0, 0.5), done, clock=clock)
+    try:
+        for _ in range(20):
+            woken.clear()
+            clock.now += DT
+            assert tick.start()
+            assert woken.wait(10.0)
+        assert all(results is not None and len(results) >= 1 for results in seen)
+        assert not tick.busy
+    finally:
+        tick.shutdown()
