@@ -16,7 +16,7 @@
 Benchmark of the physics core: particle-seconds simulated per CPU-second, and accuracy.
 
 Usage: python benchmarks/bench_core.py [--sizes 1 100 1000 10000] [--accuracy 8]
-                                       [--scale 1 10 100]
+                                       [--scale 1 10 100] [--only atol_force]
 
 Each size runs in its own process (so its peak memory is its own) on a reversing scenario:
 pieces at random positions (seeded) resting on the cone, the cone reversing between
@@ -26,7 +26,8 @@ Accuracy: for a sample of the same pieces, exit angles and times (or final posit
 pieces that stay) are compared with scipy's Radau at rtol 1e-10 on the paper's world-frame
 equations (test/reference_model.py), with the same default solver settings.
 ``--scale S ...`` repeats both at tolerances S times the defaults (rtol and every atol),
-side by side in one run: how much accuracy a looser tolerance gives up for its speed.
+side by side in one run: how much accuracy a looser tolerance gives up for its speed;
+``--only atol_force`` (or another) scales that one alone.
 """
 
 import argparse
@@ -61,14 +62,19 @@ def starts(count: int, seed: int = 1) -> np.ndarray:
     return np.column_stack([x, y, z])
 
 
+#: The tolerances ``--scale`` multiplies (``--only`` picks one of them).
+TOLERANCES = ('rtol', 'atol_position', 'atol_velocity', 'atol_force')
+#: Set by ``--only``: the one tolerance scaled (None: all of them).
+ONLY: str | None = None
+
+
 def params(scale: float) -> object:
-    """Return the default SimParams with every tolerance multiplied by ``scale``."""
+    """Return the default SimParams with the tolerances (or ONLY) multiplied by ``scale``."""
     from cone_feeder_sim.physics.params import SolverParams
     from cone_feeder_sim.physics.simulation import SimParams
     d = SolverParams()
-    return SimParams(solver=SolverParams(
-        rtol=d.rtol * scale, atol_position=d.atol_position * scale,
-        atol_velocity=d.atol_velocity * scale, atol_force=d.atol_force * scale))
+    return SimParams(solver=SolverParams(**{
+        key: getattr(d, key) * (scale if ONLY in (None, key) else 1.0) for key in TOLERANCES}))
 
 
 def run(count: int, scale: float = 1.0) -> dict[str, float]:
@@ -141,8 +147,12 @@ def main() -> int:
                         help='pieces compared with the Radau reference (0: skip)')
     parser.add_argument('--scale', type=float, nargs='+', default=[1.0],
                         help='tolerances (rtol and atols) times the defaults, one row each')
+    parser.add_argument('--only', choices=TOLERANCES,
+                        help='scale this tolerance alone (which one buys the steps)')
     parser.add_argument('--single', type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    global ONLY
+    ONLY = args.only
     if args.single is not None:
         run(2)  # warm-up: load or compile the numba kernels
         print(json.dumps(run(args.single, args.scale[0])))
@@ -150,13 +160,14 @@ def main() -> int:
     print(calibration_line())
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get('PYTHONPATH', ''))
     print(f'reversing scenario: {DURATION} s, omega table {TABLE}, {INTERVAL * 1e3:.0f} ms '
-          'intervals, default solver settings, one core')
+          f'intervals, default solver settings, one core; scaled: {args.only or "all tolerances"}')
     print(f'{"scale":>6} {"N":>6} {"CPU s":>8} {"particle-s":>11} {"p-s per CPU-s":>14} '
           f'{"steps/p-s":>10} {"rejected":>9} {"exited":>7} {"peak RSS MiB":>13}')
     for scale in args.scale:
         for count in args.sizes:
+            only = ['--only', args.only] if args.only else []
             out = subprocess.run([sys.executable, __file__, '--single', str(count), '--scale',
-                                  str(scale)], env=env, capture_output=True, text=True,
+                                  str(scale), *only], env=env, capture_output=True, text=True,
                                  check=True).stdout
             r = json.loads(out.strip().splitlines()[-1])
             rate = r['particle_s'] / r['cpu_s']
