@@ -22,10 +22,9 @@ layouts: :mod:`cone_feeder_sim.formats.pointcloud`). Messages are plain mappings
 :mod:`cone_feeder_sim.formats.cdr` encodes; arrays are numpy arrays.
 """
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 import math
-from typing import Any, Protocol
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
 
@@ -34,6 +33,9 @@ from .pointcloud import EXIT_DTYPE, PACK_DTYPE, point_fields, STATE_DTYPE
 from ..physics.params import ModelParams
 from ..physics.simulation import ExitEvents
 from ..weigher.machine import Pack
+
+if TYPE_CHECKING:
+    from ..feeder.engine import TickResult
 
 __all__ = [
     'pose_array_positions',
@@ -354,9 +356,10 @@ class MarkerBuilder:
 # --------------------------------------------------------------------------- a tick
 
 
-class TickView(Protocol):
+@dataclass(frozen=True)
+class TickView:
     """
-    What a tick shows (a :class:`~cone_feeder_sim.feeder.engine.TickResult` is one).
+    What a tick shows, for a caller without a TickResult (the headless runner).
 
     t (s) the end of the tick; ids (N,), positions (N, 3) (m), velocities (N, 3) (m/s),
     masses (N,) (kg) of the pieces at t, world frame; exits during the tick; channel_mass
@@ -373,9 +376,9 @@ class TickView(Protocol):
     channel_mass: np.ndarray
     angle: float
     omega: float
-    hoppers: np.ndarray | None
-    packs: Sequence[Pack]
-    reset: bool
+    hoppers: np.ndarray | None = None
+    packs: tuple[Pack, ...] = ()
+    reset: bool = False
 
 
 class TickMessages:
@@ -398,8 +401,8 @@ class TickMessages:
         self.schedule = MarkerSchedule(markers_rate)
         self._markers = MarkerBuilder(model, frame_id, codec)
 
-    def __call__(self, tick: TickView) -> list[tuple[str, dict[str, Any]]]:
-        """Return the tick's messages in publishing order."""
+    def __call__(self, tick: 'TickView | TickResult') -> list[tuple[str, dict[str, Any]]]:
+        """Return the tick's messages in publishing order (a TickResult has the same fields)."""
         head = header(tick.t, self.frame_id)
         out: list[tuple[str, dict[str, Any]]] = []
         if self.clock:

@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from .mcap_writer import McapRecorder
-from .messages import stamp_ns, TickMessages
+from .messages import stamp_ns, TickMessages, TickView
 from .run_recorder import END_METADATA_NAME, make_parent_dir
 from .topics import RUNNER_TOPICS, TOPICS
 from .. import __version__
@@ -57,7 +57,7 @@ from ..feeder.scenario import Scenario
 from ..physics.params import (
     CHANNEL_KEYS, INTERACTION_KEYS, MODEL_KEYS, ModelParams, P_M, PRODUCT_LIMITS,
     ProductParams, SolverParams)
-from ..physics.simulation import ExitEvents, Failure, Simulator, StepResult
+from ..physics.simulation import Failure, Simulator, StepResult
 from ..weigher.machine import Pack, Weigher
 
 __all__ = [
@@ -311,24 +311,6 @@ def scenario_metadata(scenario: Scenario, source: str, topics: Mapping[str, str]
         seed=str(scenario.feed_seed) if scenario.feed is not None else '')
 
 
-@dataclasses.dataclass(frozen=True)
-class _Interval:
-    """A runner interval as :class:`~.messages.TickView` reads it (no reset)."""
-
-    t: float
-    ids: np.ndarray
-    positions: np.ndarray
-    velocities: np.ndarray
-    masses: np.ndarray
-    exits: ExitEvents
-    channel_mass: np.ndarray
-    angle: float
-    omega: float
-    hoppers: np.ndarray | None
-    packs: tuple[Pack, ...]
-    reset: bool = False
-
-
 class ScenarioRecorder:
     """
     The headless runner's MCAP output: the node's topics, written after every interval.
@@ -389,9 +371,8 @@ class ScenarioRecorder:
             hoppers = self._weigher.hopper_readings()
             packs = tuple(self._weigher.packs[self._packs_written:])
             self._packs_written += len(packs)
-        interval = _Interval(t, state.ids, q, qdot, state.products[:, P_M], exits,
-                             self._channel_mass.copy(), state.angle, sim.omega(), hoppers,
-                             packs)
+        interval = TickView(t, state.ids, q, qdot, state.products[:, P_M], exits,
+                            self._channel_mass.copy(), state.angle, sim.omega(), hoppers, packs)
         t_ns = stamp_ns(t)
         for name, message in self._messages(interval):
             self._write(name, message, t_ns)

@@ -15,6 +15,7 @@
 """The ticker on a fake engine and a made-up wall clock: no ROS, no physics."""
 
 from collections.abc import Iterator
+import contextlib
 import threading
 from typing import Any
 
@@ -63,8 +64,10 @@ def clock() -> FakeClock:
     return FakeClock()
 
 
-def make(engine: FakeEngine, rtf: float = 1.0, catch_up: float = 0.5) -> tuple[Ticker, Any]:
-    """Return a ticker and the list of its done() calls and before_tick() calls."""
+@contextlib.contextmanager
+def ticking(engine: FakeEngine, rtf: float = 1.0,
+            catch_up: float = 0.5) -> Iterator[tuple[Ticker, dict[str, int]]]:
+    """Yield a ticker and the counts of its done() and before_tick() calls; shut it down."""
     calls = {'done': 0, 'before': 0}
 
     def done() -> None:
@@ -73,15 +76,25 @@ def make(engine: FakeEngine, rtf: float = 1.0, catch_up: float = 0.5) -> tuple[T
     def before() -> None:
         calls['before'] += 1
 
-    return Ticker(engine, Pacer(DT, rtf, catch_up), done, before, engine.clock), calls
+    ticker = Ticker(engine, Pacer(DT, rtf, catch_up), done, before, engine.clock)
+    try:
+        yield ticker, calls
+    finally:
+        ticker.shutdown()
+
+
+def anchored(ticker: Ticker) -> Ticker:
+    """Run the first tick (it anchors the pacer); return the ticker."""
+    ticker.start()
+    ticker.finish()
+    return ticker
 
 
 @pytest.fixture
 def ticker(clock: FakeClock) -> Iterator[tuple[Ticker, Any, FakeEngine]]:
     engine = FakeEngine(clock)
-    ticker, calls = make(engine)
-    yield ticker, calls, engine
-    ticker.shutdown()
+    with ticking(engine) as (ticker, calls):
+        yield ticker, calls, engine
 
 
 def test_the_first_start_runs_one_tick_on_the_worker(ticker: Any) -> None:
@@ -98,8 +111,7 @@ def test_the_first_start_runs_one_tick_on_the_worker(ticker: Any) -> None:
 
 def test_the_ticks_due_run_in_one_job_and_are_collected(ticker: Any) -> None:
     tick, calls, engine = ticker
-    tick.start()
-    tick.finish()
+    anchored(tick)
     engine.clock.now += 5 * DT  # five periods later: five ticks are due
     assert tick.start()
     while (results := tick.collect()) is None:
@@ -109,25 +121,19 @@ def test_the_ticks_due_run_in_one_job_and_are_collected(ticker: Any) -> None:
 
 
 def test_a_job_stops_after_one_period_of_work(clock: FakeClock) -> None:
-    engine = FakeEngine(clock, cost=0.75 * DT)
-    tick, _ = make(engine)
-    try:
-        tick.start()
-        tick.finish()
+    with ticking(FakeEngine(clock, cost=0.75 * DT)) as (tick, _):
+        anchored(tick)
         clock.now += 10 * DT
         tick.start()
         results = tick.finish()
         # ticks of 0.75 periods: the second ends past the job's deadline of one period
         assert len(results) == 2
         assert all(seconds == pytest.approx(0.75 * DT) for _, seconds in results)
-    finally:
-        tick.shutdown()
 
 
 def test_a_limit_caps_the_ticks_of_a_job(ticker: Any) -> None:
     tick, _, engine = ticker
-    tick.start()
-    tick.finish()
+    anchored(tick)
     engine.clock.now += 10 * DT
     tick.start(limit=3)
     assert len(tick.finish()) == 3
@@ -135,11 +141,8 @@ def test_a_limit_caps_the_ticks_of_a_job(ticker: Any) -> None:
 
 
 def test_lag_beyond_catch_up_is_given_up_and_shown_in_the_window(clock: FakeClock) -> None:
-    engine = FakeEngine(clock)
-    tick, _ = make(engine, catch_up=0.1)
-    try:
-        tick.start()
-        tick.finish()
+    with ticking(FakeEngine(clock), catch_up=0.1) as (tick, _):
+        anchored(tick)
         clock.now += 1.0
         tick.start()
         assert len(tick.finish()) == round(0.1 / DT)  # catch_up worth of ticks, no more
@@ -147,31 +150,21 @@ def test_lag_beyond_catch_up_is_given_up_and_shown_in_the_window(clock: FakeCloc
         assert tick.window.lag_max == pytest.approx(0.1)
         tick.new_window()
         assert tick.window.given_up == 0.0
-    finally:
-        tick.shutdown()
 
 
 def test_as_fast_as_possible_one_tick_a_job_and_the_fast_timer(clock: FakeClock) -> None:
-    engine = FakeEngine(clock)
-    tick, _ = make(engine, rtf=0.0)
-    try:
+    with ticking(FakeEngine(clock), rtf=0.0) as (tick, _):
         assert tick.timer_period == FAST_TIMER_PERIOD
         for k in range(3):
             assert tick.start()
             assert [r for r, _ in tick.finish()] == [k]
-    finally:
-        tick.shutdown()
-    paced, _ = make(FakeEngine(clock), rtf=2.0)
-    try:
+    with ticking(FakeEngine(clock), rtf=2.0) as (paced, _):
         assert paced.timer_period == pytest.approx(DT / 2.0)
-    finally:
-        paced.shutdown()
 
 
 def test_restart_anchors_the_pacer_again(ticker: Any) -> None:
     tick, _, engine = ticker
-    tick.start()
-    tick.finish()
+    anchored(tick)
     engine.clock.now += 0.4  # paused for 0.4 s: resuming does not make it up
     tick.restart()
     tick.start()
@@ -179,15 +172,11 @@ def test_restart_anchors_the_pacer_again(ticker: Any) -> None:
 
 
 def test_a_failed_tick_is_raised_by_finish_and_done_is_still_called(clock: FakeClock) -> None:
-    engine = FakeEngine(clock, fail_at=0)
-    tick, calls = make(engine)
-    try:
+    with ticking(FakeEngine(clock, fail_at=0)) as (tick, calls):
         tick.start()
         with pytest.raises(RuntimeError, match='the tick failed'):
             tick.finish()
         assert calls['done'] == 1 and not tick.busy
-    finally:
-        tick.shutdown()
     assert tick.finish() == []  # nothing running after the shutdown
 
 
