@@ -33,13 +33,14 @@ class InstallWithKernels(install):
     """
     Install, then leave numba's cache of the kernels warm in the installed package.
 
-    A colcon build (ament_python) and a ``setup.py install`` end here, so that the first
-    ``ros2 run cone_feeder_sim sim_node`` compiles nothing. Kernels cached in the source tree
-    (by scripts/setup_venv.sh) are copied first: numba keys its cache on the source file's
-    time stamp and size, which the install keeps, so only what they lack is compiled. A
-    failure to compile (numba missing at build time) is a warning: the first start then
-    compiles, as without this step. A staged install (``--root``: a wheel for pip, a Debian
-    package) is left alone: numba's cache would not match the files where they land.
+    A colcon build (ament_python: ``setup.py install --single-version-externally-managed``)
+    ends here, so that the first ``ros2 run cone_feeder_sim sim_node`` compiles nothing.
+    Kernels cached in the source tree for this Python (by scripts/setup_venv.sh) are copied
+    first: numba keys its cache on the source file's time stamp and size, which the install
+    keeps, so only what they lack is compiled. A failure (numba missing at build time, a
+    compile that hangs for 30 minutes) is a warning: the first start then compiles, as
+    without this step. A staged install (``--root``: a wheel for pip, a Debian package) is
+    left alone: numba's cache would not match the files where they land.
     """
 
     def run(self) -> None:
@@ -49,17 +50,23 @@ class InstallWithKernels(install):
             return
         source = Path(__file__).resolve().parent / package_name
         target = Path(self.install_lib) / package_name
-        for cached in source.glob('**/__pycache__/*.nb[ic]'):
-            copy = target / cached.relative_to(source)
-            copy.parent.mkdir(exist_ok=True)
-            shutil.copy2(cached, copy)
-        env = dict(os.environ)
-        env['PYTHONPATH'] = os.pathsep.join(
-            [self.install_lib] + ([env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
-        done = subprocess.run([sys.executable, '-m', f'{package_name}.cli', 'compile'],
-                              cwd=self.install_lib, env=env, stderr=subprocess.STDOUT,
-                              check=False)
-        if done.returncode != 0:
+        version = f'py{sys.version_info.major}{sys.version_info.minor}'  # this Python's only
+        try:
+            for cached in source.glob(f'**/__pycache__/*.{version}*.nb[ic]'):
+                copy = target / cached.relative_to(source)
+                copy.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(cached, copy)
+            env = dict(os.environ)
+            env['PYTHONPATH'] = os.pathsep.join(
+                [self.install_lib] + ([env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
+            done = subprocess.run([sys.executable, '-m', f'{package_name}.cli', 'compile'],
+                                  cwd=self.install_lib, env=env, stderr=subprocess.STDOUT,
+                                  check=False, timeout=1800)
+            failed = done.returncode != 0
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            self.warn(f'{exc}')
+            failed = True
+        if failed:
             self.warn('compiling the kernels failed; the first start will compile them '
                       f'(set {NO_COMPILE}=1 to skip this step)')
 

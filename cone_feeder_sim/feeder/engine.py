@@ -651,8 +651,8 @@ class FeederEngine:
         if feed is not None:
             check_feed_fits(self._config.model, feed)
         if len(self._pending) >= MAX_PENDING_INPUTS:
-            raise InputError(f'Reconfigure refused: {MAX_PENDING_INPUTS} inputs are already '
-                             'waiting for the next tick')
+            raise InputError(f'{MAX_PENDING_INPUTS} inputs are already waiting for the next '
+                             'tick')
 
     # ------------------------------------------------------------------ the tick
 

@@ -111,8 +111,6 @@ def load_resim_plan(source: RunSource) -> ResimPlan:
                      recording.problem)
 
 
-#: Parameters that recordings made before they existed lack, with the value those runs had:
-#: they were coupled exactly.
 class Resimulation:
     """
     A re-simulation under way: the plan, whether it still runs, what each tick gets.
@@ -167,6 +165,8 @@ class Resimulation:
                 f'{t:.6f} s); paused: resume with ~/pause false to go on live')
 
 
+#: Parameters that recordings made before they existed lack, with the value those runs had:
+#: they were coupled exactly.
 BEFORE_THEY_EXISTED: dict[str, Any] = {
     'interactions.coupling': 'exact',
     'interactions.coupling_tolerance': InteractionParams().coupling_tolerance}

@@ -114,8 +114,7 @@ class SimNode(GuardedNode):
                                                   float(values['catch_up'])),
                               done=lambda: self._job_done.trigger(),
                               before_tick=self._before_tick)
-        #: marker rate changes (from tick index, rate): the worker may be ticks ahead of the
-        #: published ones, so a change takes effect from the tick its event names
+        #: marker rate changes (from tick index, rate): the worker may be ticks ahead of those
         self._marker_rates: list[tuple[int, float]] = []
         self._paused = False
         self._totals = RunTotals()
@@ -168,8 +167,7 @@ class SimNode(GuardedNode):
             return declare(self, spec)
         return declare_recorded(self, spec, recorded_parameter(self._resim.plan, spec.name))
 
-    def _values(self) -> dict[str, Any]:
-        # get_parameter_or: an empty list in a parameter file leaves an array NOT_SET
+    def _values(self) -> dict[str, Any]:  # _or: a '[]' in a parameter file leaves NOT_SET
         return {name: self.get_parameter_or(name).value for name in self._specs}
 
     # ------------------------------------------------------------------ public surface
@@ -427,6 +425,8 @@ class SimNode(GuardedNode):
     def _on_timer(self) -> None:
         if self._ticker.busy:
             self._on_job_done()  # a finished job whose wake-up has not been served yet
+        elif self.replaying and self._resim.remaining(self._engine.tick_index) <= 0:
+            self._finish_resim()  # its last ticks were collected by a pause or a close
         elif not self._paused:
             self._start_ticks()
 

@@ -17,9 +17,9 @@ The live node's ticks: a job on a worker thread, as many ticks as the pacer says
 
 The node's timer calls :meth:`Ticker.start`; the ticks that are due (:class:`~.pacing.Pacer`)
 run on one worker thread (the integration releases the GIL and uses every core), stopping
-after one period of wall time, and ``done()`` is called from the worker when they are
-finished, so that the node's executor thread collects and publishes them
-(:meth:`Ticker.collect`) and starts the next job at once while it publishes. Pause, step
+after one period of wall time, and ``done()`` is called when they can be collected, so
+that the node's executor thread collects and publishes them (:meth:`Ticker.collect`) and
+starts the next job at once while it publishes. Pause, step
 and shutdown wait for the running job (:meth:`Ticker.finish`). Free of rclpy: the tests
 drive it with a fake engine.
 """
@@ -58,8 +58,9 @@ class Ticker:
     """
     Runs ``engine``'s ticks on a worker thread, paced by ``pacer`` (see the module docs).
 
-    done: called after each job, once its ticks can be collected (on the worker thread; the
-    node triggers a guard condition);
+    done: called after each job, once its ticks can be collected (on the worker thread, or
+    on the starting thread when the job was already done; the node triggers a guard
+    condition);
     before_tick: called before each tick on the thread that runs it (re-simulation submits
     the recorded inputs of the tick there); clock: the steady wall clock (s).
     """
