@@ -720,6 +720,10 @@ def resting_height(model: ModelParams, product: ProductParams, x: float, y: floa
     return cone_surface_height(model, x, y) + gap
 
 
+#: The kernels :func:`warm_up` loaded in this process: 'piece', 'batched', coupling names.
+_LOADED: set[str] = set()
+
+
 def warm_up(model: ModelParams | None = None, batched: bool = False) -> None:
     """
     Compile (or load from numba's cache) the integration kernels now, not inside a tick.
@@ -734,19 +738,24 @@ def warm_up(model: ModelParams | None = None, batched: bool = False) -> None:
     RL vector environment, unless ``batched``: :func:`advance_many`, which the RL vector
     environment loads when it is built). Without, every kernel (``cone-feeder-sim compile``,
     which the install runs). A first call after an install compiles (tens of seconds); later ones
-    load the cache in well under a second.
+    load the cache in well under a second; a kernel already loaded in this process is not
+    run again (every engine an RL environment builds at a reset calls this).
     """
     params = SimParams()
     base = params.model
     x = 0.5 * base.r
     start = (x, 0.0, resting_height(base, base.product, x, 0.0))
-    state, _ = add_particles(SimState(), params, [start], None, None, omega=0.0)
-    advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
-    if model is None or batched:
-        advance_many([state], params, [RotationProfile.constant(1.0)], [1.0e-3])
+    if 'piece' not in _LOADED or ((model is None or batched) and 'batched' not in _LOADED):
+        state, _ = add_particles(SimState(), params, [start], None, None, omega=0.0)
+        advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
+        _LOADED.add('piece')
+        if model is None or batched:
+            advance_many([state], params, [RotationProfile.constant(1.0)], [1.0e-3])
+            _LOADED.add('batched')
     couplings: tuple[str, ...] = COUPLING_CHOICES
     if model is not None:
         couplings = (model.interactions.coupling,) if model.interactions.enabled else ()
+    couplings = tuple(c for c in couplings if c not in _LOADED)
     # the contact kernels (neighbour search, multirate and exact coupling) with two touching
     # pieces
     other = (x + 0.045, 0.0, resting_height(base, base.product, x + 0.045, 0.0))
@@ -756,6 +765,7 @@ def warm_up(model: ModelParams | None = None, batched: bool = False) -> None:
         params = SimParams(model=touching, solver=params.solver)
         state, _ = add_particles(SimState(), params, [start, other], None, None, omega=0.0)
         advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
+        _LOADED.add(coupling)
 
 
 def kernel_cache_note(seconds: float, hint: bool = True) -> str:

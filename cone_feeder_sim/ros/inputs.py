@@ -44,18 +44,25 @@ class InputOutcome:
     """
     What became of one received message: refusals, and a warning to log (or None).
 
-    texts: the log line of each refusal (None: ``<kind> refused: <reason>``).
+    entries: each refusal with its log line (None: ``<kind> refused: <reason>``).
     """
 
-    refusals: tuple[Refusal, ...] = ()
+    entries: tuple[tuple[Refusal, str | None], ...] = ()
     warning: str | None = None
-    texts: tuple[str | None, ...] = ()
+
+    @classmethod
+    def refused(cls, *refusals: Refusal) -> 'InputOutcome':
+        """Return the outcome of refusals logged the usual way."""
+        return cls(tuple((refusal, None) for refusal in refusals))
+
+    @property
+    def refusals(self) -> tuple[Refusal, ...]:
+        """Return the refusals."""
+        return tuple(refusal for refusal, _ in self.entries)
 
     def lines(self) -> list[tuple[Refusal, str]]:
         """Return each refusal with its log line."""
-        texts = self.texts + (None,) * (len(self.refusals) - len(self.texts))
-        return [(r, text or f'{r.kind} refused: {r.reason}')
-                for r, text in zip(self.refusals, texts)]
+        return [(r, text or f'{r.kind} refused: {r.reason}') for r, text in self.entries]
 
 
 class Inputs:
@@ -82,7 +89,7 @@ class Inputs:
             value = self._decode('rotation_cmd', data)['data']
             target = self._engine.command(value)
         except (CdrError, ConeFeederError) as exc:
-            return InputOutcome((Refusal('rotation_cmd', 1, str(exc)),))
+            return InputOutcome.refused(Refusal('rotation_cmd', 1, str(exc)))
         if target != value:
             return InputOutcome(warning=f'rotation_cmd {value:g} rad/s clamped to the limit '
                                         f'{abs(target):g} rad/s')
@@ -93,32 +100,30 @@ class Inputs:
             values = self._decode('channel_feed', data)['data']
             self._engine.submit(ChannelFeed(tuple(values)))
         except (CdrError, ConeFeederError) as exc:
-            return InputOutcome((Refusal('channel_feed', 1, str(exc)),))
+            return InputOutcome.refused(Refusal('channel_feed', 1, str(exc)))
         return InputOutcome()
 
     def _spawn(self, data: bytes) -> InputOutcome:
         try:
             frame, positions = pose_array_positions(data)
         except CdrError as exc:
-            return InputOutcome((Refusal('spawn', 1, f'cannot decode the message: {exc}'),))
+            return InputOutcome.refused(Refusal('spawn', 1, f'cannot decode the message: {exc}'))
         if frame not in ('', self._frame):
-            return InputOutcome((Refusal(
+            return InputOutcome.refused(Refusal(
                 'spawn', positions.shape[0], f'poses are in frame {frame!r}, expected '
-                f'{self._frame!r} (or an empty frame_id)'),))
+                f'{self._frame!r} (or an empty frame_id)'))
         # new pieces start at rest in the world frame (dropped)
         offer = self._engine.offer_spawn(positions, np.zeros_like(positions))
-        refusals: list[Refusal] = []
-        texts: list[str | None] = []
-        if offer.invalid is not None:
-            reason = offer.invalid.reason.replace('position[', 'pose [')
-            refusals.append(Refusal('spawn', offer.invalid.count, reason))
-            texts.append(f'spawn: refused {offer.invalid.count} of {offer.total} poses: '
-                         f'{reason}')
-        for refusal in (offer.excess, offer.queue):
-            if refusal is not None:
-                refusals.append(refusal)
-                texts.append(None)
-        return InputOutcome(tuple(refusals), texts=tuple(texts))
+        entries: list[tuple[Refusal, str | None]] = []
+        for refusal in offer.refusals:
+            if refusal is offer.invalid:  # said in the node's words: poses
+                reason = refusal.reason.replace('position[', 'pose [')
+                entries.append((Refusal('spawn', refusal.count, reason),
+                                f'spawn: refused {refusal.count} of {offer.total} poses: '
+                                f'{reason}'))
+            else:
+                entries.append((refusal, None))
+        return InputOutcome(tuple(entries))
 
 
 class RefusalThrottle:

@@ -144,6 +144,10 @@ class Resimulation:
         """Return how many recorded ticks are left after ``tick_index`` ticks."""
         return self.plan.ticks - tick_index
 
+    def due_to_end(self, tick_index: int) -> bool:
+        """Tell whether it still runs though ``tick_index`` ticks made every recorded one."""
+        return self.active and tick_index >= self.plan.ticks
+
     def submit_inputs(self, engine: FeederEngine) -> None:
         """Submit the recorded inputs of the engine's next tick (on the ticking thread)."""
         if self.active:

@@ -158,8 +158,7 @@ class SimNode(GuardedNode):
             f'simulating {self._engine.piece_count} pieces, dt = {self._engine.dt:g} s, '
             f'real_time_factor = {self._ticker.pacer.rtf:g}, feed '
             f'{self._engine.feed.rate:g} pieces/s')
-        if self._resim is not None and self._resim.plan.ticks == 0:
-            self._finish_resim()
+        self._end_resim_if_done()  # a recording of no tick
 
     def _declare(self, spec: ParamSpec) -> Parameter:
         """Declare a parameter; while re-simulating, take recorded values over given ones."""
@@ -377,8 +376,7 @@ class SimNode(GuardedNode):
         self._node_event('step')
         result = self._ticker.tick_once()
         self._publish_results([result])
-        if self.replaying and self._resim.remaining(self._engine.tick_index) <= 0:
-            self._finish_resim()
+        self._end_resim_if_done()
         return result[0]
 
     # ------------------------------------------------------------------ parameters
@@ -425,9 +423,8 @@ class SimNode(GuardedNode):
     def _on_timer(self) -> None:
         if self._ticker.busy:
             self._on_job_done()  # a finished job whose wake-up has not been served yet
-        elif self.replaying and self._resim.remaining(self._engine.tick_index) <= 0:
-            self._finish_resim()  # its last ticks were collected by a pause or a close
-        elif not self._paused:
+        # a re-simulation whose last ticks a pause or a close collected ends here
+        elif not self._paused and not self._end_resim_if_done():
             self._start_ticks()
 
     def _on_job_done(self) -> None:
@@ -439,16 +436,19 @@ class SimNode(GuardedNode):
         if not self._paused:
             self._start_ticks()  # the worker ticks on while these are published
         self._publish_results(results)
-        if (self.replaying and not self._ticker.busy
-                and self._resim.remaining(self._engine.tick_index) <= 0):
-            self._finish_resim()
+        if not self._ticker.busy:
+            self._end_resim_if_done()
         window = self._ticker.window
         window.callback_max = max(window.callback_max, time.perf_counter() - begin)
 
-    def _finish_resim(self) -> None:
+    def _end_resim_if_done(self) -> bool:
+        """End a re-simulation that made every recorded tick (pause); return whether it did."""
+        if self._resim is None or not self._resim.due_to_end(self._engine.tick_index):
+            return False
         text = self._resim.finish(self._engine.t)
         self.set_paused(True)
         self.get_logger().info(text)
+        return True
 
     def _publish_results(self, results: Ticks) -> None:
         """Publish and count finished ticks, in tick order (executor thread)."""
