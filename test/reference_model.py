@@ -134,7 +134,7 @@ def activation_constants(p: dict[str, Any]) -> tuple[Any, Any]:
     """
     s0 = p['s0']
     s_c = p['s_c_ratio'] * s0
-    r_t = 2.0 * np.arctanh(p['r_a']) / (s0 - s_c)
+    r_t = 2.0 * _call('arctanh', p['r_a']) / (s0 - s_c)
     r_c = (s0 + s_c) / 2.0
     return r_t, r_c
 
@@ -164,9 +164,9 @@ def constraint_terms(q: np.ndarray, qdot: np.ndarray, p: dict[str, Any]) -> dict
     # Eq. 36: d v_perp / d q_dot (not normalised).
     e_fc = np.stack(np.broadcast_arrays((h / r) * q1 / rho, (h / r) * q2 / rho, 1.0))
     # Eq. 31: activation function.
-    r_act = (1.0 - np.tanh(r_t * (s_perp - r_c))) / 2.0
+    r_act = (1.0 - _call('tanh', r_t * (s_perp - r_c))) / 2.0
     # Eq. 35: constraint force magnitude F_c(v_perp).
-    f_c = p['r_f'] * (1.0 - np.tanh(p['r_d'] * v_perp)) / 2.0
+    f_c = p['r_f'] * (1.0 - _call('tanh', p['r_d'] * v_perp)) / 2.0
     return {'s_perp': s_perp, 'v_perp': v_perp, 'e_Fc': e_fc, 'R_a': r_act, 'F_c': f_c,
             'rho': rho}
 
@@ -187,9 +187,9 @@ def static_friction(v_dif: np.ndarray, r_act: Any, normal: Any,
     d, v_c, v_s = p['d'], p['v_C'], p['v_S']
     mu_c, mu_s = p['mu_C'], p['mu_S']
     f_visc = r_act * d * v                                   # eq. 7, times R_a
-    f_coul = mu_c * normal * np.tanh(v / v_c)                # eq. 8
-    f_s_delta = (mu_s - mu_c * np.tanh(v_s / v_c)) * normal - r_act * d * v_s  # eq. 10
-    f_strib = f_s_delta * (v / v_s) * np.exp(0.5 - 0.5 * (v / v_s) ** 2)       # eq. 9
+    f_coul = mu_c * normal * _call('tanh', v / v_c)          # eq. 8
+    f_s_delta = (mu_s - mu_c * _call('tanh', v_s / v_c)) * normal - r_act * d * v_s  # eq. 10
+    f_strib = f_s_delta * (v / v_s) * _call('exp', 0.5 - 0.5 * (v / v_s) ** 2)  # eq. 9
     return (f_visc + f_coul + f_strib) * e_v
 
 
@@ -207,6 +207,16 @@ def reference_rhs(t: float, y: np.ndarray, p: dict[str, Any], omega: float,
     :return: dy/dt, the shape of y.
     """
     del t, domega
+    return rhs_terms(y, p, omega)['rhs']
+
+
+def rhs_terms(y: np.ndarray, p: dict[str, Any], omega: float) -> dict[str, np.ndarray]:
+    """
+    Return reference_rhs (key ``rhs``) with the terms its last two blocks add up.
+
+    ``q_s`` (Q_s^c), ``a`` (eq. 14's factor), ``f_g`` and ``f_perp`` (3, ...), in N or
+    dimensionless: what :func:`rounding_bound` needs to size the round-off of the sums.
+    """
     literal, tangential = readings(p)
     y = np.asarray(y, dtype=float)
     q = y[0:3]
@@ -237,15 +247,78 @@ def reference_rhs(t: float, y: np.ndarray, p: dict[str, Any], omega: float,
     q_s = static_friction(v_fric, r_act, normal, p)
 
     # Eq. 14 with the full |v_dif| in every mode; eq. 37.
-    a = 1.0 - np.exp(-(v_dif_abs / p['qdot_F']) ** 2)
+    a = 1.0 - _call('exp', -(v_dif_abs / p['qdot_F']) ** 2)
     dq_d = a / p['T_F'] * (q_s - q_d)
 
     # Eq. 38: Q_d + F_g + F_perp, F_perp = R_a F_c e_Fc (in newtons in every mode).
     weight = np.broadcast_to(-p['m'] * p['g'], r_act.shape)
     f_g = np.stack([np.zeros_like(weight), np.zeros_like(weight), weight])
-    qddot = (q_d + f_g + r_act * f_c * e_fc) / p['m']
+    f_perp = r_act * f_c * e_fc
+    qddot = (q_d + f_g + f_perp) / p['m']
 
-    return np.concatenate([qdot, qddot, dq_d])
+    return {'rhs': np.concatenate([qdot, qddot, dq_d]), 'q_s': q_s, 'a': a, 'f_g': f_g,
+            'f_perp': f_perp}
+
+
+# The transcendental functions the numpy definition calls. Two correct implementations of
+# one (numpy's SIMD loops, the C library numba calls) may differ by a few ulps; the
+# definition calls them through _call so that rounding_bound can perturb each call.
+_TRANSCENDENTALS: dict[str, Any] = {'exp': np.exp, 'tanh': np.tanh, 'arctanh': np.arctanh}
+_perturbation: dict[str, Any] = {}
+
+
+def _call(name: str, x: Any) -> Any:
+    """Return the transcendental ``name`` of x, perturbed where rounding_bound says."""
+    if not _perturbation:
+        return _TRANSCENDENTALS[name](x)
+    index = _perturbation['count']
+    _perturbation['count'] += 1
+    if index != _perturbation['call']:
+        return _TRANSCENDENTALS[name](x)
+    rel = _perturbation['rel']
+    if _perturbation['where'] == 'argument':
+        return _TRANSCENDENTALS[name](x * (1.0 + rel))
+    return _TRANSCENDENTALS[name](x) * (1.0 + rel)
+
+
+#: The ulps by which one transcendental result (or its argument, computed in another
+#: order) may differ between two correct implementations: numpy's AVX-512 exp and AVX2
+#: tanh differ from glibc's by up to 1 and 2 ulps (measured on 100,000 arguments), each
+#: within its documented bound of 4 ulps of the true value.
+ULPS = 4.0
+
+
+def rounding_bound(y: np.ndarray, p: dict[str, Any], omega: float,
+                   ulps: float = ULPS) -> np.ndarray:
+    """
+    Bound |f1 - f2| for two correct implementations of reference_rhs at states y (9, ...).
+
+    What the arithmetic guarantees, to first order: each transcendental call's result and
+    argument may be off by ``ulps`` ulps, times the right-hand side's sensitivity to that
+    call (its condition, measured by perturbing one call at a time, central differences);
+    and each sum of eq. 38 and eq. 37 may be off by ``ulps`` ulps of its terms' magnitudes
+    (the same operations in another order). Returns the bound (9, ...), in y's units / s.
+    """
+    eps = ulps * np.finfo(float).eps
+    terms = rhs_terms(y, p, omega)
+    a, q_s, q_d = np.abs(terms['a']), np.abs(terms['q_s']), np.abs(np.asarray(y)[6:9])
+    bound = np.zeros_like(terms['rhs'])
+    bound[3:6] = eps * (q_d + np.abs(terms['f_g']) + np.abs(terms['f_perp'])) / p['m']
+    bound[6:9] = eps * a / p['T_F'] * (q_s + q_d)
+    _perturbation.update(count=0, call=-1, rel=0.0, where='result')
+    try:
+        rhs_terms(y, p, omega)
+        calls = _perturbation['count']
+        rel = 1e-7
+        for call, where in itertools.product(range(calls), ('result', 'argument')):
+            change = []
+            for sign in (1.0, -1.0):
+                _perturbation.update(count=0, call=call, rel=sign * rel, where=where)
+                change.append(rhs_terms(y, p, omega)['rhs'])
+            bound += eps * np.abs(change[0] - change[1]) / (2.0 * rel)
+    finally:
+        _perturbation.clear()
+    return bound
 
 
 #: The parameters of one piece, in the order of the rows compiled_rhs takes.

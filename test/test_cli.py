@@ -135,6 +135,17 @@ def test_bad_scenario_fails_before_running(
     assert not events.exists()
 
 
+def test_a_run_of_too_many_outputs_is_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text(SCENARIO + 'output_interval: 1.0e-12\n')
+    events = tmp_path / 'events.csv'
+    assert main(['run', str(scenario), '--events', str(events), '--quiet']) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'output_interval: 1e-12 s' in err and 'outputs' in err
+    assert not events.exists()
+
+
 def test_unwritable_events_file(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     scenario = tmp_path / 'scenario.yaml'
     scenario.write_text(SCENARIO)

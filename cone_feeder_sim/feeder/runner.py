@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .feed import draw_feed
-from .scenario import Scenario
+from .scenario import check_output_count, Scenario
 from ..physics.simulation import ExitEvents, Failure, SimParams, Simulator, StepResult
 from ..weigher.machine import Pack, Weigher
 
@@ -104,8 +104,11 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
     and the interval's StepResult (its exits and failures). stop, if given, is asked before
     every interval; when it returns True the run ends there (result.stopped), so an
     interval is never cut short. weigher: the machine to drive when the scenario has one
-    (default: a new one), so that a progress callback can record it as it goes.
+    (default: a new one), so that a progress callback can record it as it goes. Raises
+    ScenarioError before anything runs when the scenario asks for more than MAX_OUTPUTS
+    output intervals.
     """
+    check_output_count(scenario.duration, scenario.output_interval)
     sim = start_simulator(scenario)
     feed = scenario.feed if scenario.feed is not None and scenario.feed.rate > 0.0 else None
     rng = np.random.default_rng(scenario.feed_seed)

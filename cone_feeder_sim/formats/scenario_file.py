@@ -52,7 +52,7 @@ import numpy as np
 from .parameter_file import load_model_params, load_weigher_params, read_yaml
 from ..errors import ConeFeederError, ScenarioError
 from ..feeder.feed import check_feed_fits, feed_from_mapping
-from ..feeder.scenario import ParticleSpec, Scenario
+from ..feeder.scenario import check_output_count, ParticleSpec, Scenario
 from ..physics.params import (
     interaction_params_from_mapping, PRODUCT_LIMITS, solver_params_from_mapping)
 from ..physics.rotation import RotationProfile
@@ -96,6 +96,7 @@ def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenari
             raise ScenarioError(f'scenario is missing the key {key!r}')
     duration = _positive('duration', content['duration'])
     interval = _positive('output_interval', content.get('output_interval', 0.01))
+    check_output_count(duration, interval)
     overrides = content.get('model') or {}
     if not isinstance(overrides, Mapping):
         raise ScenarioError(f'model must be a mapping of parameter overrides, got {overrides!r}')

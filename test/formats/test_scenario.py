@@ -14,10 +14,13 @@
 
 """Tests of formats.scenario_file: valid scenarios load, malformed ones are refused."""
 
+from dataclasses import replace
 import math
 from pathlib import Path
 
 from cone_feeder_sim.errors import ScenarioError
+from cone_feeder_sim.feeder.runner import run_scenario
+from cone_feeder_sim.feeder.scenario import MAX_OUTPUTS, output_count
 from cone_feeder_sim.formats.scenario_file import load_scenario, scenario_from_mapping
 from cone_feeder_sim.physics.model import activation
 from cone_feeder_sim.physics.params import ModelParams, ProductParams
@@ -86,6 +89,25 @@ def test_malformed_scenarios_name_the_problem(change: dict, fragment: str) -> No
     with pytest.raises(ScenarioError) as info:
         scenario_from_mapping(content)
     assert fragment in str(info.value)
+
+
+def test_a_run_asks_for_a_bounded_number_of_outputs() -> None:
+    # 10^12 outputs would never end: refused with the key and the count; the interval
+    # itself is not bounded (a millisecond of a hard collision at 54-ns outputs passes)
+    with pytest.raises(ScenarioError) as info:
+        scenario_from_mapping({**VALID, 'output_interval': 1e-12})
+    message = str(info.value)
+    assert message.startswith('output_interval: 1e-12 s') and '\n' not in message
+    assert '4,000,000,000,000 outputs' in message and f'{MAX_OUTPUTS:,}' in message
+    short = scenario_from_mapping({**VALID, 'duration': 1e-3, 'output_interval': 54e-9})
+    assert output_count(short.duration, short.output_interval) == 18519
+    at_bound = scenario_from_mapping({**VALID, 'output_interval': 4.0 / MAX_OUTPUTS})
+    assert output_count(at_bound.duration, at_bound.output_interval) == MAX_OUTPUTS
+    with pytest.raises(ScenarioError, match=f'{MAX_OUTPUTS + 1:,} outputs'):
+        scenario_from_mapping({**VALID, 'output_interval': 4.0 / (MAX_OUTPUTS + 0.5)})
+    # a scenario built in code is held to the same bound by the runner, before it runs
+    with pytest.raises(ScenarioError, match='output_interval: 1e-12 s'):
+        run_scenario(replace(at_bound, output_interval=1e-12))
 
 
 def test_a_feed_makes_the_particles_optional() -> None:

@@ -20,6 +20,10 @@ not with the reference module's own helpers, so that a slip in either shows up.
 """
 
 import math
+import os
+from pathlib import Path
+import subprocess
+import sys
 from typing import Any
 
 import numpy as np
@@ -228,19 +232,50 @@ def test_tangential_friction_ignores_normal_motion() -> None:
 def test_the_compiled_rhs_is_the_numpy_one(reading: dict[str, str]) -> None:
     # the solvers run the compiled transcription: at random states in and out of contact,
     # sliding and nearly sticking, one at a time and vectorised, it equals reference_rhs
+    # within what two correct implementations of exp and tanh (numpy's SIMD loops, the C
+    # library numba calls) allow: a few ulps of each call times the rhs's condition
+    # (rm.rounding_bound). The other numpy code paths of this CPU: the test below.
     rng = np.random.default_rng(3)
     p = rm.table2_params(2, **reading)
     fun = rm.compiled_rhs(p)
+    # a defect of one part in a billion (the mass), which the bound must catch
+    off = rm.compiled_rhs({**p, 'm': p['m'] * (1.0 + 1e-9)})
     states = np.array([np.r_[rng.uniform(-0.2, 0.2, 2), rng.uniform(0.0, 0.06),
                              rng.normal(0.0, 0.3, 3) * rng.choice([1e-6, 1e-3, 1.0]),
                              rng.normal(0.0, 1.0, 3)] for _ in range(300)]).T  # (9, 300)
     for omega in (-8.0, 0.0, 5.5):
         expected = rm.reference_rhs(0.0, states, p, omega)
+        bound = rm.rounding_bound(states, p, omega)
+        assert (np.abs(fun(states, omega) - expected) <= bound).all()
+        assert not (np.abs(off(states, omega) - expected) <= bound).all()
+        # the bound is round-off: below 1e-13 of each block's largest value at most
+        # states, 1e-8 where the rhs is ill-conditioned (1 - exp(-x^2) at tiny speeds)
         scale = np.abs(expected).reshape(3, 3, -1).max(axis=1).repeat(3, axis=0)
-        # to round-off of each block (q', q'', Q_d') of each state
-        assert (np.abs(fun(states, omega) - expected) <= 1e-12 * scale).all()
+        assert np.median(bound / scale) < 1e-13 and (bound <= 1e-8 * scale).all()
         one = fun(states[:, 7], omega)
         assert one.shape == (9,) and np.array_equal(one, fun(states, omega)[:, 7])
+
+
+#: numpy's SIMD groups to turn off (NPY_DISABLE_CPU_FEATURES) to run its other exp and tanh
+#: loops: AVX-512 exp off, then AVX2 tanh too (numpy 2.x names; baseline X86_V2 stays).
+NUMPY_PATHS = ('X86_V4 AVX512_ICL AVX512_SPR', 'X86_V3 X86_V4 AVX512_ICL AVX512_SPR')
+
+
+@pytest.mark.parametrize('disabled', NUMPY_PATHS)
+def test_the_bound_holds_on_numpy_s_other_code_paths(disabled: str) -> None:
+    # numpy picks its exp and tanh loops by CPU (AVX-512, AVX2, baseline): the comparison
+    # above runs again with this CPU's faster paths off, so one machine checks them all
+    features = set(np._core._multiarray_umath.__cpu_dispatch__)  # what this numpy can turn off
+    turned_off = [name for name in disabled.split() if name in features]
+    if not turned_off:
+        pytest.skip(f'numpy {np.__version__} dispatches none of {disabled}')
+    env = {**os.environ, 'NPY_DISABLE_CPU_FEATURES': ' '.join(turned_off)}
+    test = f'{__file__}::test_the_compiled_rhs_is_the_numpy_one'
+    done = subprocess.run([sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider',
+                           '-p', 'no:xdist', test], env=env, capture_output=True, text=True,
+                          timeout=300, cwd=Path(__file__).parent)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-2000:]
+    assert '3 passed' in done.stdout
 
 
 def test_invalid_options_raise() -> None:
