@@ -20,8 +20,9 @@ The command line: `cone-feeder-sim run`, `report` and `recover`.
 `cone-feeder-sim recover IN.mcap OUT.mcap` makes a complete file of an unfinished one.
 
 `run` appends every exit to the CSV as its output interval ends (flushed). SIGINT (Ctrl-C)
-or SIGTERM ends it cleanly after the current interval: the CSV keeps the exits so far, the
-MCAP file is closed complete, and one line says where the run stopped. With `--view` the
+or SIGTERM ends it cleanly within a step of the integration (:class:`StopOnSignals`): the
+interval under way is dropped, the CSV keeps the exits of the finished ones, the MCAP file
+is closed complete, and one line says where the run stopped. With `--view` the
 run is served live on a Foxglove WebSocket (:mod:`cone_feeder_sim.view.live`), paced to
 `--speed` simulated seconds per second; the view stays up after the run's end until Ctrl-C
 (exit code 0 then), and the files are the same as without it.
@@ -52,6 +53,7 @@ from .formats.mcap_reader import recover_mcap
 from .formats.run_files import run_to_files, RunFiles
 from .formats.scenario_file import load_scenario
 from .physics.simulation import kernel_cache_note, Simulator, StepResult, warm_up
+from .physics.stop import StopFlag
 from .view.live import DEFAULT_FPS, DEFAULT_PORT, LiveView
 from .view.topics import layout_file
 
@@ -107,29 +109,45 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 SignalHandler = Callable[[int, FrameType | None], Any] | int | None
 
 
-class StopOnSignals:
+class StopOnSignals(StopFlag):
     """
     While active, SIGINT and SIGTERM only note that the run is to stop (no KeyboardInterrupt).
 
-    The runner calls the object between intervals (its stop predicate); ``signum`` is the
-    first signal received, None if none; later ones change nothing. The previous handlers
-    come back at the end of the with block. A signal ignored on entry (as a shell script
+    A :class:`~cone_feeder_sim.physics.stop.StopFlag`: the runner calls it between intervals
+    (its stop predicate) and the kernels read it between steps, so a signal ends even an
+    interval that computes for seconds within a step. Python runs its signal handlers only
+    between bytecodes of the main thread, which a kernel holds for the whole interval; so
+    the signal's byte on the wake-up fd (``signal.set_wakeup_fd``, written by the C handler
+    at once) wakes a watcher thread that sets the flag. ``signum`` is the first signal
+    received, None if none; later ones change nothing. The previous handlers (and wake-up
+    fd) come back at the end of the with block. A signal ignored on entry (as a shell script
     leaves SIGINT for a command it runs with ``&``) stays ignored. Outside the main thread,
     where Python cannot install signal handlers, it installs none.
     """
 
     def __init__(self, signals: Sequence[signal.Signals] = STOP_SIGNALS) -> None:
         """Prepare to catch `signals`."""
+        super().__init__()
         self.signals = tuple(signals)
         self.signum: int | None = None
         self._previous: dict[int, SignalHandler] = {}
+        self._previous_fd = -1
+        self._write_fd = -1
+        self._watcher: threading.Thread | None = None
 
     def __enter__(self) -> Self:
-        """Install the handlers."""
+        """Install the handlers and the watcher of the wake-up fd."""
         if threading.current_thread() is threading.main_thread():
             for signum in self.signals:
                 if signal.getsignal(signum) != signal.SIG_IGN:
                     self._previous[signum] = signal.signal(signum, self._handle)
+        if self._previous:
+            read_fd, self._write_fd = os.pipe()
+            os.set_blocking(self._write_fd, False)
+            self._previous_fd = signal.set_wakeup_fd(self._write_fd, warn_on_full_buffer=False)
+            self._watcher = threading.Thread(target=self._watch, args=(read_fd,),
+                                             name='stop-on-signals', daemon=True)
+            self._watcher.start()
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
@@ -138,14 +156,32 @@ class StopOnSignals:
         for signum, handler in self._previous.items():
             signal.signal(signum, signal.SIG_DFL if handler is None else handler)
         self._previous.clear()
+        if self._watcher is not None:
+            signal.set_wakeup_fd(self._previous_fd)
+            os.close(self._write_fd)  # the watcher reads the end of the pipe and returns
+            self._watcher.join()
+            self._watcher = None
+
+    def _watch(self, read_fd: int) -> None:
+        """Set the flag on every stop signal written to the wake-up fd (watcher thread)."""
+        try:
+            while data := os.read(read_fd, 64):  # waits without the GIL
+                for signum in data:
+                    if signum in self.signals:
+                        self._stop(signum)
+                if self._previous_fd >= 0:  # whoever had the wake-up fd before gets it too
+                    with contextlib.suppress(OSError):
+                        os.write(self._previous_fd, data)
+        finally:
+            os.close(read_fd)
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self._stop(signum)
+
+    def _stop(self, signum: int) -> None:
         if self.signum is None:
             self.signum = signum
-
-    def __call__(self) -> bool:
-        """Tell whether a signal asked the run to stop."""
-        return self.signum is not None
+        self.request()
 
 
 def check_writable(path: str, what: str = 'events') -> None:

@@ -31,6 +31,10 @@ class InputError(ConeFeederError, ValueError):
     """An input to the running simulation (a command, a spawn) is refused."""
 
 
+class Stopped(ConeFeederError):
+    """A stop was requested (a signal, a node's shutdown) while a tick ran: it was dropped."""
+
+
 class RecordingError(ConeFeederError):
     """A recording cannot be opened, written, read or recovered."""
 

@@ -58,13 +58,14 @@ from typing import Any
 import numpy as np
 
 from .feed import check_feed_fits, draw_feed, FEED_LIMITS, FeedParams
-from ..errors import ConeFeederError, InputError, ParameterError, ScenarioError
+from ..errors import ConeFeederError, InputError, ParameterError, ScenarioError, Stopped
 from ..physics.params import (
     check_integer, check_number, Limit, ModelParams, P_M, ProductParams, SolverParams)
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
     add_particles, advance, advance_many, as_points, check_positions, ExitEvents, Failure,
     position_problems, SimParams, SimState, StepResult, StepStats, warm_up, world_from_cone)
+from ..physics.stop import StopFlag
 from ..weigher.combination import warm_up as warm_up_weigher
 from ..weigher.machine import check_machine, Pack, Weigher, WeigherParams, WeigherStats
 
@@ -408,6 +409,7 @@ class FeederEngine:
         self._state = SimState()
         self._channel_mass = np.zeros(config.model.channels.count)
         self._observers: list[TickObserver] = []
+        self._stop = StopFlag()
         warm_up(config.model)  # its kernels are loaded now, never inside a tick
         if config.weigher is not None:
             warm_up_weigher()
@@ -728,11 +730,25 @@ class FeederEngine:
         if callback in self._observers:
             self._observers.remove(callback)
 
+    def request_stop(self) -> None:
+        """
+        Stop the tick under way within a step of its integration, and every later one.
+
+        Callable from any thread (a node shutting down while its worker ticks). The tick
+        under way, and every tick after, raises :class:`~cone_feeder_sim.errors.Stopped`
+        instead of returning: the engine is done (its inputs of that tick were applied).
+        """
+        self._stop.request()
+
     def tick(self) -> TickResult:
         """Apply the queued inputs, drop the feed, advance by dt and return the result."""
+        if self._stop.is_set():
+            raise Stopped(f'the engine was stopped at t = {self.t:g} s')
         plan = self._begin_tick()
-        return self._end_tick(plan, advance(self._state, self._sim_params, plan.profile,
-                                            plan.t1))
+        step = advance(self._state, self._sim_params, plan.profile, plan.t1, self._stop)
+        if step.stopped:
+            raise Stopped(f'the tick from t = {plan.t0:g} s was stopped and dropped')
+        return self._end_tick(plan, step)
 
     def _begin_tick(self) -> '_TickPlan':
         """Apply the queued inputs and the feed at the tick's start; return the tick's plan."""

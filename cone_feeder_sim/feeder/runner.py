@@ -30,6 +30,7 @@ import numpy as np
 from .feed import draw_feed
 from .scenario import check_output_count, Scenario
 from ..physics.simulation import ExitEvents, Failure, SimParams, Simulator, StepResult
+from ..physics.stop import StopFlag
 from ..weigher.machine import Pack, Weigher
 
 
@@ -60,20 +61,17 @@ class RunResult:
         """Return all exits as columns (ids, t, angle_deg, channel, position, velocity, mass)."""
         names = ('ids', 't', 'angle_deg', 'channel', 'position', 'velocity', 'mass')
         if not self.exits:
-            empty = ExitEvents(ids=np.zeros(0, dtype=np.int64), t=np.zeros(0),
-                               angle_deg=np.zeros(0), channel=np.zeros(0, dtype=np.int64),
-                               position=np.zeros((0, 3)), velocity=np.zeros((0, 3)),
-                               mass=np.zeros(0))
-            return {n: getattr(empty, n) for n in names}
+            return {n: getattr(ExitEvents.none(), n) for n in names}
         return {n: np.concatenate([getattr(e, n) for e in self.exits]) for n in names}
 
 
 Progress = Callable[[float, Simulator, StepResult], None]
 
 
-def start_simulator(scenario: Scenario) -> Simulator:
+def start_simulator(scenario: Scenario, stop: StopFlag | None = None) -> Simulator:
     """Return a simulator at t = 0 with the scenario's pieces on the cone (ids 0 .. P - 1)."""
-    sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation)
+    sim = Simulator(SimParams(model=scenario.model, solver=scenario.solver), scenario.rotation,
+                    stop=stop)
     for spec in scenario.particles:
         sim.add([spec.position], None if spec.velocity is None else [spec.velocity],
                 [spec.product])
@@ -102,14 +100,17 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
     Particle ids are the 0-based indices of the pieces in the scenario. progress, if given,
     is called after every output interval with the simulated time at its end, the simulator
     and the interval's StepResult (its exits and failures). stop, if given, is asked before
-    every interval; when it returns True the run ends there (result.stopped), so an
-    interval is never cut short. weigher: the machine to drive when the scenario has one
-    (default: a new one), so that a progress callback can record it as it goes. Raises
+    every interval; when it returns True the run ends there (result.stopped). A stop that is
+    a :class:`~cone_feeder_sim.physics.stop.StopFlag` is also read inside the interval, by
+    the kernels between two steps: once set, the interval under way is dropped and the run
+    ends at the one before (the exits reported are those of the finished intervals).
+    weigher: the machine to drive when the scenario has one (default: a new one), so that
+    a progress callback can record it as it goes. Raises
     ScenarioError before anything runs when the scenario asks for more than MAX_OUTPUTS
     output intervals.
     """
     check_output_count(scenario.duration, scenario.output_interval)
-    sim = start_simulator(scenario)
+    sim = start_simulator(scenario, stop if isinstance(stop, StopFlag) else None)
     feed = scenario.feed if scenario.feed is not None and scenario.feed.rate > 0.0 else None
     rng = np.random.default_rng(scenario.feed_seed)
     result = RunResult(pieces=len(scenario.particles))
@@ -129,6 +130,9 @@ def run_scenario(scenario: Scenario, progress: Progress | None = None, *,
                 sim.add(drop.positions, np.zeros_like(drop.positions), drop.products)
                 result.pieces += len(drop.products)
         step = sim.advance_to(t1)
+        if step.stopped:
+            result.stopped = True
+            break
         result.accepted_steps += step.stats.accepted
         result.rejected_steps += step.stats.rejected
         if len(step.exits):

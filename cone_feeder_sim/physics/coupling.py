@@ -63,6 +63,7 @@ from .contact.law import force_between, moved_force, pair_constants
 from .integrator import ACTIVE, advance_particle, GROUPS, STAT_REASON
 from .model import STATE_SIZE
 from .params import P_M
+from .stop import stop_requested
 
 __all__ = ['advance_coupled', 'COUPLING_STAT_WIDTH', 'CST_ACCEPTED', 'CST_FORCED',
            'CST_REJECTED']
@@ -317,7 +318,7 @@ def impulse_error(products, status, start, pair, other, sign, begin, end, f_star
 @jit
 def advance_group(g, groups, y, products, machine, sub_t, sub_omega, sub_domega, r_exit, h_prop,
                   status, t_event, rtol, atol, h_min, h_max, h_kink, max_steps, stats, load,
-                  rate, kink):
+                  rate, kink, stop):
     """Advance the ACTIVE pieces g, g + groups, ... over one interval with their loads."""
     n = STATE_SIZE
     work = np.empty((2, n, n))
@@ -332,7 +333,7 @@ def advance_group(g, groups, y, products, machine, sub_t, sub_omega, sub_domega,
         st, t_ev, hp = advance_particle(y[p], products[p], machine, sub_t, sub_omega,
                                         sub_domega, r_exit, hp, rtol, atol, h_min, h_max,
                                         h_kink, max_steps, stats[p], work, piv, k, y1, f0,
-                                        load[p], rate[p])
+                                        load[p], rate[p], stop)
         status[p] = st
         t_event[p] = t_ev
         h_prop[p] = hp
@@ -341,7 +342,7 @@ def advance_group(g, groups, y, products, machine, sub_t, sub_omega, sub_domega,
 @pjit
 def advance_pieces(y, products, machine, sub_t, sub_omega, sub_domega, r_exit, h_prop, status,
                    t_event, rtol, atol, h_min, h_max, h_kink, max_steps, stats, load, rate,
-                   kink):
+                   kink, stop):
     """
     Advance every ACTIVE piece over one interval on numba's threads (:func:`advance_group`).
 
@@ -352,13 +353,13 @@ def advance_pieces(y, products, machine, sub_t, sub_omega, sub_domega, r_exit, h
     for g in numba.prange(groups):
         advance_group(g, groups, y, products, machine, sub_t, sub_omega, sub_domega, r_exit,
                       h_prop, status, t_event, rtol, atol, h_min, h_max, h_kink, max_steps,
-                      stats, load, rate, kink)
+                      stats, load, rate, kink, stop)
 
 
 @jit
 def advance_coupled(y, products, pairs, hist, inter, machine, seg_t, seg_omega, seg_domega,
                     r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max, h_kink,
-                    max_steps, stats, h_coupling, tolerance, counters):
+                    max_steps, stats, h_coupling, tolerance, counters, stop):
     """
     Advance pieces that touch over seg_t[0]..seg_t[-1] by multirate coupling; return H.
 
@@ -368,8 +369,9 @@ def advance_coupled(y, products, pairs, hist, inter, machine, seg_t, seg_omega, 
     updated in place. h_coupling (s) the proposed first coupling interval; tolerance (m)
     the largest position error one interval may give a piece; counters
     (COUPLING_STAT_WIDTH,) int64. Pieces that exit or fail inside an interval leave the
-    coupling at their time, their pairs (and histories) with them. Returns the proposed
-    next coupling interval (s).
+    coupling at their time, their pairs (and histories) with them. stop (1,) int64: when
+    set (:mod:`.stop`), the call returns at the next step of a piece, the interval unfinished.
+    Returns the proposed next coupling interval (s).
     """
     n = y.shape[0]
     m = pairs.shape[0]
@@ -398,6 +400,8 @@ def advance_coupled(y, products, pairs, hist, inter, machine, seg_t, seg_omega, 
     begin[:] = f_start  # the loads start from the pair forces, and stay continuous
     rejected = False
     while t < t1:
+        if stop_requested(stop):
+            return h
         remaining = t1 - t
         hc = interval_cap(y, products, pairs, status, inter, min(h, remaining))
         hc = max(hc, min(H_FLOOR, remaining))
@@ -417,11 +421,13 @@ def advance_coupled(y, products, pairs, hist, inter, machine, seg_t, seg_omega, 
         if n >= PARALLEL_PIECES:
             advance_pieces(y, products, machine, sub_t[:c + 1], sub_omega[:c],
                            sub_domega[:c], r_exit, h_prop, status, t_event, rtol, atol, h_min,
-                           h_max, h_kink, max_steps, stats, load, rate, kink)
+                           h_max, h_kink, max_steps, stats, load, rate, kink, stop)
         else:
             advance_group(0, 1, y, products, machine, sub_t[:c + 1], sub_omega[:c],
                           sub_domega[:c], r_exit, h_prop, status, t_event, rtol, atol, h_min,
-                          h_max, h_kink, max_steps, stats, load, rate, kink)
+                          h_max, h_kink, max_steps, stats, load, rate, kink, stop)
+        if stop_requested(stop):
+            return h
         correct(y_save, y, products, pairs, hist, status, inter, hist_end, f_end)
         err = impulse_error(products, status, start, pair, other, sign, begin, end, f_start,
                             f_end, hc)

@@ -46,13 +46,14 @@ from .contact.tangential import rotate_and_cap, SLIDING_MARGIN
 from .integrator import (
     ACTIVE, after_acceptance, error_norm, EXITED, FAILED, locate_exit,
     proposal_after_rejection, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS,
-    STAT_ACCEPTED, STAT_REASON, STAT_REJECTED)
+    STAT_ACCEPTED, STAT_REASON, STAT_REJECTED, STOPPED)
 from .model import jacobian, rhs, rhs_omega_derivative, STATE_SIZE
 from .params import P_M
 from .rosenbrock import (
     A21, A31, A32, A41, A42, A43, A51, A52, A53, A54, C2, C21, C3, C31, C32, C4, C41, C42,
     C43, C51, C52, C53, C54, C61, C62, C63, C64, C65, D1, D2, D3, D4, GAMMA, lu_factor,
     lu_solve)
+from .stop import stop_requested
 
 __all__ = ['advance_island', 'islands_of']
 
@@ -331,7 +332,7 @@ def settle_histories(flat, products, pairs, inter, n):
 
 @jit
 def advance_island(y, hist, products, pairs, inter, machine, seg_t, seg_omega, seg_domega,
-                   r_exit, h_prop, rtol, atol, h_min, h_max, h_kink, max_steps, stats):
+                   r_exit, h_prop, rtol, atol, h_min, h_max, h_kink, max_steps, stats, stop):
     """
     Advance an island through the segments, or until one of its pieces exits, or it fails.
 
@@ -340,7 +341,8 @@ def advance_island(y, hist, products, pairs, inter, machine, seg_t, seg_omega, s
     counters of the island. The step control is that of
     :func:`integrator.advance_particle`. Returns (status, t, h_prop, piece): ACTIVE with the
     end time; EXITED with the exit time of ``piece`` (y, hist then hold the state at that
-    time); FAILED with the time reached.
+    time); FAILED with the time reached; STOPPED with the time reached when stop[0] (1,)
+    int64 was set before a step (:mod:`.stop`).
     """
     n = y.shape[0]
     m = pairs.shape[0]
@@ -386,6 +388,9 @@ def advance_island(y, hist, products, pairs, inter, machine, seg_t, seg_omega, s
         fresh = True
         rejected = False
         while t < t_end:
+            if stop_requested(stop):
+                unpack(flat, y, hist)
+                return STOPPED, t, h_prop, -1
             remaining = t_end - t
             truncated = h_prop >= remaining
             h = remaining if truncated else h_prop

@@ -26,7 +26,9 @@ acceleration: seg_t (K+1,) breakpoints (s), seg_omega (K,) angular velocity at t
 each segment (rad/s), seg_domega (K,) angular acceleration in it (rad/s^2). Steps never
 cross a breakpoint.
 
-A failed step is a result: the particle gets status FAILED and the others carry on.
+A failed step is a result: the particle gets status FAILED and the others carry on. A stop
+request (``stop`` (1,) int64 set to 1 from another thread, :mod:`.stop`) is read before
+every step: the particle gets status STOPPED and the interval is left unfinished.
 """
 
 import math
@@ -36,12 +38,14 @@ import numpy as np
 
 from .model import rhs, STATE_SIZE
 from .rosenbrock import add_load, ERROR_ORDER, prepare_step, rodas_step
+from .stop import stop_requested
 
 jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
 ACTIVE = 0
 EXITED = 1
 FAILED = 2
+STOPPED = 3  # a stop was requested (stop[0] != 0) before the interval was done
 
 # failure reasons (stored in stats[:, STAT_REASON]; 0: none)
 REASON_STEP_UNDERFLOW = 1
@@ -165,7 +169,7 @@ def locate_exit(h, ya, yb, r_exit):
 @jit
 def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, h_prop, rtol,
                      atol, h_min, h_max, h_kink, max_steps, stats, work, piv, k, y1, f0, load,
-                     rate):
+                     rate, stop):
     """
     Advance one particle through all segments, or until it exits or fails.
 
@@ -178,8 +182,9 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
     acceleration added to the field at seg_t[0], changing at rate (3,) (m/s^3) (zeros for
     a piece alone; the pair forces over a coupling interval, :mod:`coupling`).
     Returns (status, t_end_or_exit, h_prop): status ACTIVE when the interval was completed,
-    EXITED with the exit time (y then holds the state at the exit), or FAILED with the time
-    reached (y holds the last accepted state; stats[STAT_REASON] tells why).
+    EXITED with the exit time (y then holds the state at the exit), FAILED with the time
+    reached (y holds the last accepted state; stats[STAT_REASON] tells why), or STOPPED with
+    the time reached when stop[0] was set before a step.
     """
     n_seg = seg_omega.shape[0]
     steps = 0
@@ -197,6 +202,8 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
         fresh = True  # f0 and the Jacobian must be evaluated at the current y
         rejected = False
         while t < t_end:
+            if stop_requested(stop):
+                return STOPPED, t, h_prop
             remaining = t_end - t
             truncated = h_prop >= remaining
             h = remaining if truncated else h_prop
@@ -269,15 +276,15 @@ GROUPS = 64
 
 @numba.njit(cache=True, error_model='numpy', parallel=True, nogil=True)
 def advance_batch(y, products, machine, seg_t, seg_omega, seg_domega, r_exit, h_prop, status,
-                  t_event, rtol, atol, h_min, h_max, h_kink, max_steps, stats):
+                  t_event, rtol, atol, h_min, h_max, h_kink, max_steps, stats, stop):
     """
     Advance every ACTIVE particle over the interval seg_t[0]..seg_t[-1], on all threads.
 
     y (N, 9) cone-axes states, products (N, PRODUCT_WIDTH) product rows, machine the global
     row, h_prop (N,) proposed step sizes, status (N,) int64, t_event (N,) receives exit or
-    failure times, atol (9,), stats (N, STAT_WIDTH) int64 counters. Arrays are updated in
-    place. The thread count is numba's (``numba.set_num_threads``); results do not depend
-    on it.
+    failure times, atol (9,), stats (N, STAT_WIDTH) int64 counters, stop (1,) int64 the stop
+    request (:mod:`.stop`). Arrays are updated in place. The thread count is numba's
+    (``numba.set_num_threads``); results do not depend on it.
     """
     n = STATE_SIZE
     count = y.shape[0]
@@ -295,7 +302,7 @@ def advance_batch(y, products, machine, seg_t, seg_omega, seg_domega, r_exit, h_
             st, t_ev, hp = advance_particle(y[p], products[p], machine, seg_t, seg_omega,
                                             seg_domega, r_exit, h_prop[p], rtol, atol, h_min,
                                             h_max, h_kink, max_steps, stats[p], work, piv, k,
-                                            y1, f0, load, load)
+                                            y1, f0, load, load, stop)
             status[p] = st
             t_event[p] = t_ev
             h_prop[p] = hp
@@ -304,7 +311,7 @@ def advance_batch(y, products, machine, seg_t, seg_omega, seg_domega, r_exit, h_
 @numba.njit(cache=True, error_model='numpy', parallel=True, nogil=True)
 def advance_batch_owned(y, products, machine, owner, seg_t, seg_omega, seg_domega, seg_count,
                         r_exit, h_prop, status, t_event, rtol, atol, h_min, h_max, h_kink,
-                        max_steps, stats):
+                        max_steps, stats, stop):
     """
     Advance the pieces of several feeders, each under its own rotation, in one call.
 
@@ -332,7 +339,7 @@ def advance_batch_owned(y, products, machine, owner, seg_t, seg_omega, seg_domeg
                                             seg_omega[o, :m], seg_domega[o, :m], r_exit,
                                             h_prop[p], rtol, atol, h_min, h_max, h_kink,
                                             max_steps, stats[p], work, piv, k, y1, f0, load,
-                                            load)
+                                            load, stop)
             status[p] = st
             t_event[p] = t_ev
             h_prop[p] = hp

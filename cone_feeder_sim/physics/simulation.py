@@ -38,13 +38,14 @@ from .exact import advance_island, islands_of
 from .integrator import (
     ACTIVE, advance_batch, advance_batch_owned, EXITED, FAILED, REASON_NOT_FINITE,
     REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED,
-    STAT_WIDTH)
+    STAT_WIDTH, STOPPED)
 from .model import STATE_SIZE
 from .neighbours import contact_pairs
 from .params import (
     COUPLING_CHOICES, ModelParams, P_M, P_S0, product_row, PRODUCT_WIDTH, ProductParams,
     SolverParams)
 from .rotation import rotate_z, RotationProfile
+from .stop import StopFlag
 from ..errors import ScenarioError
 
 FAILURE_REASONS = {
@@ -128,6 +129,14 @@ class ExitEvents:
         """Return the number of exits."""
         return int(self.ids.shape[0])
 
+    @staticmethod
+    def none() -> 'ExitEvents':
+        """Return no exits (every array of length 0)."""
+        return ExitEvents(ids=np.zeros(0, dtype=np.int64), t=np.zeros(0),
+                          angle_deg=np.zeros(0), channel=np.zeros(0, dtype=np.int64),
+                          position=np.zeros((0, 3)), velocity=np.zeros((0, 3)),
+                          mass=np.zeros(0))
+
 
 @dataclass(frozen=True)
 class Failure:
@@ -172,12 +181,19 @@ class StepStats:
 
 @dataclass(frozen=True)
 class StepResult:
-    """What :func:`advance` returns."""
+    """
+    What :func:`advance` returns.
+
+    stopped: a stop was requested (:class:`~.stop.StopFlag`) before the interval was done;
+    the interval is dropped: state is the state it started from, with no exits, failures
+    or steps.
+    """
 
     state: SimState
     exits: ExitEvents
     failures: tuple[Failure, ...]
     stats: StepStats
+    stopped: bool = False
 
 
 def world_from_cone(y: np.ndarray, angle: float, omega: float) -> tuple[np.ndarray, ...]:
@@ -320,16 +336,17 @@ def remove_particles(state: SimState, ids: object) -> SimState:
 
 
 def advance(state: SimState, params: SimParams, profile: RotationProfile,
-            t1: float) -> StepResult:
+            t1: float, stop: StopFlag | None = None) -> StepResult:
     """
     Advance every particle from state.t to t1 under the rotation profile.
 
     Pieces that cross the cone edge are located inside the step, reported in the result's
     exits and removed; pieces whose integration fails are reported and removed; the others
-    carry on. The inputs are not modified.
+    carry on. The inputs are not modified. stop: read by the kernels before every step;
+    once it is set the call returns within a step, the interval dropped (``stopped``).
     """
     seg_t, seg_omega, seg_domega = profile.segments(state.t, t1)
-    work = _Work(state)
+    work = _Work(state, stop)
     solver = params.solver
     interactions = params.model.interactions
     n = state.count
@@ -339,24 +356,25 @@ def advance(state: SimState, params: SimParams, profile: RotationProfile,
         advance_batch(work.y, state.products, params.global_row, seg_t, seg_omega, seg_domega,
                       params.model.r, work.step_size, work.status, work.t_event, solver.rtol,
                       params.atol, solver.h_min, solver.h_max, solver.h_init,
-                      solver.max_steps, work.stats)
+                      solver.max_steps, work.stats, work.stop)
     return _result(state, params, profile, t1, work)
 
 
 def advance_many(states: Sequence[SimState], params: SimParams,
-                 profiles: Sequence[RotationProfile], t1: Sequence[float]) -> list[StepResult]:
+                 profiles: Sequence[RotationProfile], t1: Sequence[float],
+                 stop: StopFlag | None = None) -> list[StepResult]:
     """
     Advance several independent feeders (same parameters, each its own rotation) at once.
 
     Without contact between pieces, the pieces of every feeder go to one compiled call
     (:func:`~cone_feeder_sim.physics.integrator.advance_batch_owned`) that spreads them over
     the cores; with contact each feeder is advanced by :func:`advance` in turn. Each result
-    is what :func:`advance` gives for that feeder alone, bit for bit.
+    is what :func:`advance` gives for that feeder alone, bit for bit (stop: as there).
     """
     if not len(states) == len(profiles) == len(t1):
         raise ValueError(f'{len(states)} states, {len(profiles)} profiles and {len(t1)} ends')
     if params.model.interactions.enabled:
-        return [advance(s, params, p, t) for s, p, t in zip(states, profiles, t1)]
+        return [advance(s, params, p, t, stop) for s, p, t in zip(states, profiles, t1)]
     segments = [p.segments(s.t, t) for s, p, t in zip(states, profiles, t1)]
     width = max(len(omega) for _, omega, _ in segments)
     seg_t = np.zeros((len(states), width + 1))
@@ -368,7 +386,7 @@ def advance_many(states: Sequence[SimState], params: SimParams,
         seg_t[f, :len(times)] = times
         seg_omega[f, :len(omega)] = omega
         seg_domega[f, :len(domega)] = domega
-    works = [_Work(s) for s in states]
+    works = [_Work(s, stop) for s in states]
     counts = [s.count for s in states]
     if sum(counts):
         solver = params.solver
@@ -382,7 +400,7 @@ def advance_many(states: Sequence[SimState], params: SimParams,
         advance_batch_owned(y, products, params.global_row, owner, seg_t, seg_omega,
                             seg_domega, seg_count, params.model.r, step_size, status, t_event,
                             solver.rtol, params.atol, solver.h_min, solver.h_max,
-                            solver.h_init, solver.max_steps, stats)
+                            solver.h_init, solver.max_steps, stats, works[0].stop)
         bounds = np.cumsum([0] + counts)
         for w, a, b in zip(works, bounds[:-1], bounds[1:]):
             w.y, w.step_size, w.status = y[a:b], step_size[a:b], status[a:b]
@@ -390,11 +408,17 @@ def advance_many(states: Sequence[SimState], params: SimParams,
     return [_result(s, params, p, t, w) for s, p, t, w in zip(states, profiles, t1, works)]
 
 
+#: The stop request of a call given none: never set.
+_NEVER = StopFlag()
+
+
 class _Work:
     """The arrays one advance updates in place: copies of a state's, and the counters."""
 
-    def __init__(self, state: SimState) -> None:
+    def __init__(self, state: SimState, stop: StopFlag | None = None) -> None:
         n = state.count
+        self.flag = stop
+        self.stop = (stop or _NEVER).array
         self.y = state.y.copy()
         self.step_size = state.step_size.copy()
         self.status = np.full(n, ACTIVE, dtype=np.int64)
@@ -410,6 +434,10 @@ class _Work:
 def _result(state: SimState, params: SimParams, profile: RotationProfile, t1: float,
             work: _Work) -> StepResult:
     """Return the step's result: exits and failures located, the pieces that left removed."""
+    if work.flag is not None and work.flag.is_set():
+        return StepResult(state=state, exits=ExitEvents.none(), failures=(),
+                          stats=StepStats(accepted=0, rejected=0, particles=state.count),
+                          stopped=True)
     y, status, t_event, stats, counters = (work.y, work.status, work.t_event, work.stats,
                                            work.counters)
     exits = _exit_events(state, params, profile, y, status, t_event)
@@ -494,7 +522,7 @@ def _keep_contacts(state: SimState, pairs: np.ndarray, hist: np.ndarray, status:
 def _advance_alone(single: np.ndarray, state: SimState, params: SimParams,
                    segments: tuple[np.ndarray, np.ndarray, np.ndarray], y: np.ndarray,
                    step_size: np.ndarray, status: np.ndarray, t_event: np.ndarray,
-                   stats: np.ndarray) -> None:
+                   stats: np.ndarray, stop: np.ndarray) -> None:
     """Advance the pieces ``single`` (indices) alone over the segments, arrays in place."""
     if not single.size:
         return
@@ -503,7 +531,7 @@ def _advance_alone(single: np.ndarray, state: SimState, params: SimParams,
     ss = stats[single]
     advance_batch(ys, state.products[single], params.global_row, *segments, params.model.r,
                   hs, st, te, solver.rtol, params.atol, solver.h_min, solver.h_max,
-                  solver.h_init, solver.max_steps, ss)
+                  solver.h_init, solver.max_steps, ss, stop)
     y[single], step_size[single], status[single], t_event[single] = ys, hs, st, te
     stats[single] = ss
 
@@ -529,7 +557,7 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
     coupled = np.zeros(state.count, dtype=bool)
     coupled[pairs.reshape(-1)] = True
     _advance_alone(np.flatnonzero(~coupled), state, params, segments, y, step_size, status,
-                   t_event, stats)
+                   t_event, stats, work.stop)
     if not pairs.shape[0]:
         return
     if params.model.interactions.coupling == 'multirate':
@@ -563,7 +591,7 @@ def _advance_multirate(state: SimState, params: SimParams,
         params.interaction_row, params.global_row, *segments, params.model.r, hs, st, te,
         solver.rtol, params.atol, solver.h_min, solver.h_max, solver.h_init, solver.max_steps,
         ss, work.coupling_step or solver.h_init, interactions.coupling_tolerance,
-        work.counters)
+        work.counters, work.stop)
     y[members], step_size[members], status[members], t_event[members] = ys, hs, st, te
     stats[members] = ss
     return float(h_coupling)
@@ -594,13 +622,13 @@ def _advance_exact_island(state: SimState, params: SimParams, profile: RotationP
             ys, hs, np.ascontiguousarray(state.products[members]), local,
             params.interaction_row, params.global_row, seg[0], seg[1], seg[2], params.model.r,
             h, solver.rtol, params.atol, solver.h_min, solver.h_max, solver.h_init,
-            solver.max_steps, counters)
+            solver.max_steps, counters, work.stop)
         y[members] = ys
         hist[rows] = hs
         # every member took the island's steps (its cost is per piece as well)
         stats[members, STAT_ACCEPTED] += counters[STAT_ACCEPTED]
         stats[members, STAT_REJECTED] += counters[STAT_REJECTED]
-        if code == ACTIVE:
+        if code == ACTIVE or code == STOPPED:
             step_size[members] = h
             return
         if code == EXITED:
@@ -664,11 +692,14 @@ class Simulator:
     Used by the headless runner and the ROS node; all physics goes through :func:`advance`.
     """
 
-    def __init__(self, params: SimParams, profile: RotationProfile, t0: float = 0.0) -> None:
+    def __init__(self, params: SimParams, profile: RotationProfile, t0: float = 0.0,
+                 stop: StopFlag | None = None) -> None:
         """Start an empty simulation at t0 with the cone angle phi(t0) of the profile."""
         self.params = params
         self.profile = profile
         self.state = SimState(t=float(t0), angle=profile.angle(t0))
+        #: read by the kernels: set it (from any thread) to stop advance_to within a step
+        self.stop = stop if stop is not None else StopFlag()
 
     @property
     def t(self) -> float:
@@ -687,8 +718,8 @@ class Simulator:
         return ids
 
     def advance_to(self, t1: float) -> StepResult:
-        """Advance to t1 and keep the new state; return the step's result."""
-        result = advance(self.state, self.params, self.profile, t1)
+        """Advance to t1 and keep the new state; return the step's result (see stopped)."""
+        result = advance(self.state, self.params, self.profile, t1, self.stop)
         self.state = result.state
         return result
 

@@ -19,9 +19,9 @@ The node's timer calls :meth:`Ticker.start`; the ticks that are due (:class:`~.p
 run on one worker thread (the integration releases the GIL and uses every core), stopping
 after one period of wall time, and ``done()`` is called when they can be collected, so
 that the node's executor thread collects and publishes them (:meth:`Ticker.collect`) and
-starts the next job at once while it publishes. Pause, step
-and shutdown wait for the running job (:meth:`Ticker.finish`). Free of rclpy: the tests
-drive it with a fake engine.
+starts the next job at once while it publishes. Pause and step wait for the running job
+(:meth:`Ticker.finish`); shutdown stops it within a step. Free of rclpy: the tests drive it
+with a fake engine.
 """
 
 from collections.abc import Callable
@@ -31,6 +31,7 @@ from typing import Protocol
 
 from .diagnostics import DiagnosticsWindow
 from .pacing import Pacer
+from ..errors import Stopped
 from ..feeder.engine import TickResult
 
 __all__ = ['FAST_TIMER_PERIOD', 'TickEngine', 'Ticker', 'Ticks']
@@ -51,7 +52,10 @@ class TickEngine(Protocol):
         """Return the simulated time (s)."""
 
     def tick(self) -> TickResult:
-        """Run one tick."""
+        """Run one tick; raise Stopped once request_stop was called."""
+
+    def request_stop(self) -> None:
+        """Stop the tick under way within a step, from any thread."""
 
 
 class Ticker:
@@ -126,7 +130,10 @@ class Ticker:
         """Run up to ``count`` ticks, stopping after ``deadline`` (worker thread)."""
         results = []
         for _ in range(count):
-            results.append(self.tick_once())
+            try:
+                results.append(self.tick_once())
+            except Stopped:  # shutdown: the ticks finished before it are kept
+                break
             if self._clock() >= deadline:
                 break
         return results
@@ -153,7 +160,14 @@ class Ticker:
         return [] if job is None else job.result()
 
     def shutdown(self) -> Ticks:
-        """Finish the running job, stop the worker thread; return the job's ticks."""
+        """
+        Stop the running job within a step, stop the worker thread; return the job's ticks.
+
+        The tick under way is dropped (:meth:`TickEngine.request_stop`), however long its
+        integration would have taken: a node asked to stop answers at once (``ros2 launch``
+        escalates to SIGKILL after 5 s).
+        """
+        self.engine.request_stop()
         try:
             return self.finish()
         finally:

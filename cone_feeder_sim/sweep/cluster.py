@@ -17,8 +17,13 @@
 The jobs of a sweep on Dask: a ``LocalCluster`` of this machine's cores, or a scheduler.
 
 Without an address, :func:`dask_client` starts a ``LocalCluster`` with one worker process
-per core, each with one thread and numba's thread pool of one (``NUMBA_NUM_THREADS=1``):
-the jobs, not the pieces of one job, are what runs in parallel. With an address
+per core, each with one thread, and each job runs numba's kernels on that thread
+(:func:`~.job.run_job` sets numba's thread count of its thread to one): the jobs, not the
+pieces of one job, are what runs in parallel. The workers get no ``NUMBA_NUM_THREADS`` of
+their own: a spawned worker imports the command's main module (and numba, at the machine's
+core count) before the nanny sets the worker's environment, and numba refuses a later
+compile once its thread pool runs at another size than the variable then says ("Cannot set
+NUMBA_NUM_THREADS to a different value once the threads have been launched"). With an address
 (``tcp://host:port``) it connects to a running scheduler (``dask scheduler`` and ``dask
 worker``, dask-jobqueue on SLURM, dask-kubernetes, ``dask ssh``); its workers need
 cone_feeder_sim installed, not the sweep's directory, since every job's files come back
@@ -116,8 +121,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
             count = workers if workers is not None else available_cores()
             cluster = stack.enter_context(LocalCluster(
                 n_workers=count, threads_per_worker=1, processes=True,
-                dashboard_address=None, silence_logs=logging.ERROR,
-                env={'NUMBA_NUM_THREADS': '1'}))
+                dashboard_address=None, silence_logs=logging.ERROR))
             client = stack.enter_context(Client(cluster))
             client.register_plugin(IgnoreInterrupt())
         else:

@@ -69,7 +69,7 @@ def _batch(y: np.ndarray, seg_t: list[float], omega: float, max_steps: int = 1_0
     seg = np.array(seg_t)
     integrator.advance_batch(y, products, GP, seg, np.full(seg.size - 1, omega),
                              np.zeros(seg.size - 1), 0.225, h, status, t_event, 1e-5, ATOL,
-                             h_min, 0.01, 1e-5, max_steps, stats)
+                             h_min, 0.01, 1e-5, max_steps, stats, np.zeros(1, dtype=np.int64))
     return status, t_event, stats
 
 

@@ -21,7 +21,7 @@ signal; the process is always killed in teardown. The file is read back with the
 package and with rosbags (the independent reader), which decodes every message.
 """
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 import os
 from pathlib import Path
 import random
@@ -29,11 +29,13 @@ import signal
 import struct
 import subprocess
 import sys
+import time
 from typing import Any
 
 from cone_feeder_sim.formats.mcap_reader import open_recording
 from cone_feeder_sim.formats.mcap_reader import recover_mcap
 from cone_feeder_sim.formats.runlog import END_METADATA_NAME, METADATA_NAME
+from crowds import crowd_in_layers
 import mcap.exceptions
 import mcap.reader
 from mcap.records import Channel, Message
@@ -45,17 +47,20 @@ from sim_process import Client, FIRST_MESSAGE_TIMEOUT, random_domain, SimProcess
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / 'config' / 'sim_node.yaml'
+#: How long a node stopped in a long tick may take to exit: generous (the recording closed,
+#: on a loaded machine); the tick it stops would take minutes to hours.
+STOP_TIMEOUT = 30.0
 
 
 class Run:
     """A recording sim_node process and a client that follows its simulation time."""
 
-    def __init__(self, tmp_path: Path, record_path: str) -> None:
+    def __init__(self, tmp_path: Path, record_path: str, extra: Sequence[str] = ()) -> None:
         domain = random_domain()
         self.namespace = f'/rec{random.randrange(1_000_000)}'
         args = [sys.executable, '-m', 'cone_feeder_sim.ros.sim_node', '--ros-args',
                 '--params-file', str(CONFIG), '-r', f'__ns:={self.namespace}',
-                '-p', f'record_path:={record_path}', '-p', 'feed.rate:=20.0']
+                '-p', f'record_path:={record_path}', '-p', 'feed.rate:=20.0', *extra]
         env = dict(os.environ)
         env['PYTHONPATH'] = os.pathsep.join([str(ROOT)] + (
             [env['PYTHONPATH']] if env.get('PYTHONPATH') else []))
@@ -99,8 +104,8 @@ class Run:
 def start(tmp_path: Path) -> Iterator[Any]:
     runs: list[Run] = []
 
-    def make(record_path: str) -> Run:
-        runs.append(Run(tmp_path, record_path))
+    def make(record_path: str, extra: Sequence[str] = ()) -> Run:
+        runs.append(Run(tmp_path, record_path, extra))
         return runs[-1]
 
     try:
@@ -140,6 +145,54 @@ def test_signal_finishes_the_file(start: Any, tmp_path: Path, signum: int) -> No
     states = messages[f'{run.namespace}/particle_states']
     assert len(states) == ticks
     assert states[-1][0] >= run.last_ns  # everything up to the signal
+    assert sum(len(v) for v in messages.values()) == summary.statistics.message_count
+
+
+def long_tick(case: str) -> list[str]:
+    """
+    Return the node's arguments for ticks that would compute far longer than a test waits.
+
+    No step may exceed h_max = 1e-8 s: each of the five pieces alone takes 2e6 steps in a
+    0.02-s tick (seconds each); the island of 70 pieces of a crowd, coupled exactly, takes
+    2e6 steps of its 700+ unknowns (hours).
+    """
+    args = ['-p', 'solver.h_max:=1.0e-8', '-p', 'solver.max_steps:=1000000000000',
+            '-p', 'feed.rate:=0.0', '-p', 'real_time_factor:=0.0']
+    if case == 'crowd-exact':
+        crowd = crowd_in_layers(2, lift=0.0)
+        flat = ', '.join(repr(float(v)) for v in crowd.reshape(-1))  # doubles: 0.0, not 0
+        args += ['-p', f'initial_pieces.positions:=[{flat}]',
+                 '-p', f'initial_pieces.d:=[{", ".join(["225.0"] * len(crowd))}]',
+                 '-p', 'interactions.coupling:=exact']
+    return args
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize('case', ['alone', 'crowd-exact'])
+def test_a_signal_stops_the_tick_under_way(start: Any, tmp_path: Path, case: str,
+                                           signum: int) -> None:
+    # the node drops the tick under way (its kernels read the engine's stop flag) and
+    # finishes its recording: answered at once, not after the tick (ros2 launch kills a
+    # node 5 s after its SIGINT)
+    path = tmp_path / 'run.mcap'
+    run = start(str(path), long_tick(case))
+    deadline = time.monotonic() + FIRST_MESSAGE_TIMEOUT
+    while 'simulating' not in run.process.log():  # started: its first tick is under way
+        assert run.process.alive() and time.monotonic() < deadline, run.process.log()
+        time.sleep(0.05)
+    time.sleep(0.5)
+    sent = time.monotonic()
+    status = run.signal(signum, timeout=STOP_TIMEOUT)
+    took = time.monotonic() - sent
+    assert status == 0, run.process.log()
+    assert took < STOP_TIMEOUT and 'recorded' in run.process.log()
+    with path.open('rb') as stream:
+        reader = mcap.reader.make_reader(stream)
+        summary = reader.get_summary()
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    assert summary is not None and summary.statistics is not None
+    assert metadata[END_METADATA_NAME]['ticks'] == '0'  # the tick under way was dropped
+    messages = decode_all(path)
     assert sum(len(v) for v in messages.values()) == summary.statistics.message_count
 
 

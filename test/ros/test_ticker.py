@@ -15,10 +15,12 @@
 """The ticker on a fake engine and a made-up wall clock: no ROS, no physics."""
 
 from collections.abc import Iterator
+import concurrent.futures
 import contextlib
 import threading
 from typing import Any
 
+from cone_feeder_sim.errors import Stopped
 from cone_feeder_sim.ros.pacing import Pacer
 from cone_feeder_sim.ros.ticker import FAST_TIMER_PERIOD, Ticker
 import pytest
@@ -39,12 +41,19 @@ class FakeClock:
 class FakeEngine:
     """Ticks of DT that cost ``cost`` seconds of the fake clock each; may fail at a tick."""
 
-    def __init__(self, clock: FakeClock, cost: float = 0.0, fail_at: int = -1) -> None:
+    def __init__(self, clock: FakeClock, cost: float = 0.0, fail_at: int = -1,
+                 block_at: int = -1) -> None:
         self.clock = clock
         self.cost = cost
         self.fail_at = fail_at
+        self.block_at = block_at  # this tick waits until request_stop, then is dropped
+        self.blocked = threading.Event()
+        self.stop = threading.Event()
         self.tick_index = 0
         self.threads: set[str] = set()
+
+    def request_stop(self) -> None:
+        self.stop.set()
 
     @property
     def t(self) -> float:
@@ -53,6 +62,12 @@ class FakeEngine:
     def tick(self) -> Any:
         if self.tick_index == self.fail_at:
             raise RuntimeError('the tick failed')
+        if self.stop.is_set():
+            raise Stopped('stopped')
+        if self.tick_index == self.block_at:  # a tick that would compute for ever
+            self.blocked.set()
+            self.stop.wait()
+            raise Stopped('stopped')
         self.threads.add(threading.current_thread().name)
         self.clock.now += self.cost
         self.tick_index += 1
@@ -129,6 +144,24 @@ def test_a_job_stops_after_one_period_of_work(clock: FakeClock) -> None:
         # ticks of 0.75 periods: the second ends past the job's deadline of one period
         assert len(results) == 2
         assert all(seconds == pytest.approx(0.75 * DT) for _, seconds in results)
+
+
+def test_shutdown_stops_the_tick_under_way_and_keeps_the_ticks_before(
+        clock: FakeClock) -> None:
+    engine = FakeEngine(clock, block_at=3)
+    with ticking(engine) as (tick, calls):
+        anchored(tick)
+        clock.now += 10 * DT
+        assert tick.start()
+        assert engine.blocked.wait(60.0)  # the job is inside its third tick (index 3)
+        with concurrent.futures.ThreadPoolExecutor(1) as pool:
+            shutdown = pool.submit(tick.shutdown)  # asks the engine to stop: tick dropped
+            try:
+                results = shutdown.result(60.0)
+            finally:
+                engine.stop.set()  # never leave the worker blocked, even when this failed
+        assert [r for r, _ in results] == [1, 2]
+        assert calls['done'] == 2
 
 
 def test_a_limit_caps_the_ticks_of_a_job(ticker: Any) -> None:

@@ -243,13 +243,56 @@ def test_an_interrupted_sweep_runs_only_its_missing_jobs(sweep_file: Path, seria
     assert (out / 'summary.png').stat().st_size > 0
 
 
+def numba_threads_after_a_reload() -> tuple[int, int]:
+    """Return numba's thread pool size before and after it reloads its configuration."""
+    import numba
+    before = numba.config.NUMBA_NUM_THREADS
+    numba.core.config.reload_config()  # what every compile does
+    return before, numba.config.NUMBA_NUM_THREADS
+
+
 def test_the_local_cluster_has_one_single_threaded_worker_per_process() -> None:
     with dask_client(workers=2) as client:
         info = client.scheduler_info()['workers']
         assert [w['nthreads'] for w in info.values()] == [1, 1]
         assert len(set(client.run(os.getpid).values())) == 2
-        threads = client.run(lambda: __import__('numba').config.NUMBA_NUM_THREADS)
-        assert set(threads.values()) == {1}
+        # the worker's environment says what numba was started with: a compile finds it so
+        for before, after in client.run(numba_threads_after_a_reload).values():
+            assert before == after
+
+
+#: A sweep's main module as the console script is one: numba imported at its top, so a
+#: spawned worker imports it (as __mp_main__) before the nanny sets the worker's environment.
+NUMBA_MAIN = """\
+import numba
+
+from cone_feeder_sim.sweep.cluster import dask_client
+
+
+def compile_now():
+    @numba.njit
+    def twice(x):
+        return 2 * x
+    return twice(21)
+
+
+if __name__ == '__main__':
+    with dask_client(workers=1) as client:  # its kernels (and numba's threads) load first
+        print('compiled:', client.submit(compile_now).result())
+"""
+
+
+def test_a_worker_compiles_after_its_threads_started(tmp_path: Path) -> None:
+    # the first sweep after an install failed once with "Cannot set NUMBA_NUM_THREADS to a
+    # different value once the threads have been launched": numba imported with the
+    # machine's thread count, the worker's environment then saying another, and a compile
+    # (which reloads numba's configuration) after the thread pool had started
+    script = tmp_path / 'sweep_main.py'
+    script.write_text(NUMBA_MAIN)
+    env = {**os.environ, 'NUMBA_NUM_THREADS': '2'}  # not 1, whatever the machine's cores
+    done = subprocess.run([sys.executable, str(script)], env=env, cwd=tmp_path,
+                          capture_output=True, text=True, timeout=START_TIMEOUT)
+    assert done.returncode == 0 and 'compiled: 42' in done.stdout, done.stderr[-3000:]
 
 
 def test_a_failed_heartbeat_is_one_line_without_traceback() -> None:
