@@ -22,12 +22,24 @@ in free flight (no cone, no gravity: high above a still cone gravity moves them 
 way a DEM code does, velocity Verlet with a step far below the contact time and the
 history incremented by the tangential relative displacement of each step, rotated into
 the tangent plane and capped.
+
+:func:`cone_dem_run` does the same for pieces on the turning cone, compiled: each piece's
+own model is the reference model's (``reference_model.piece_rhs_into``, the paper's
+equations in the world frame), the pair law :func:`pair_force_compiled` (the transcription
+of :func:`pair_force`, which a test holds it to), and the state is advanced by the classic
+fourth-order Runge-Kutta method at a fixed step far below every time scale of the model
+(the friction filter's 0.3 ms), the histories held over a step and then incremented by
+the step's relative displacement in the frame turning with the cone (MODEL_NOTES: the
+relative velocity is taken in that frame), turned with the cone, put into the new tangent
+plane and capped, as a DEM code does.
 """
 
 from dataclasses import dataclass
 import math
 
+import numba
 import numpy as np
+from reference_model import piece_rhs_into
 from scipy.optimize import brentq, minimize_scalar
 
 #: Default product (config/table2.yaml): kg, m, Pa, 1.
@@ -182,3 +194,241 @@ def dem_run(pieces: list[Piece], law: Law, x: np.ndarray, v: np.ndarray, t_end: 
         f = f_full
         ts[k], dists[k], normals[k] = (k + 1) * dt, np.linalg.norm(x[0] - x[1]), first
     return {'x': x, 'v': v, 't': ts, 'dist': dists, 'f_n': normals}
+
+
+@numba.njit(cache=True)
+def _overlap_area(dist: float, ra: float, rb: float) -> float:
+    """overlap_area, compiled."""
+    if dist >= ra + rb:
+        return 0.0
+    x = (dist * dist - rb * rb + ra * ra) / (2.0 * dist)
+    return math.pi * (ra * ra - x * x)
+
+
+@numba.njit(cache=True)
+def pair_force_compiled(a: np.ndarray, b: np.ndarray, law: np.ndarray, d: np.ndarray,
+                        u: np.ndarray, xi: np.ndarray, out: np.ndarray) -> tuple[float, float]:
+    """
+    :func:`pair_force`, compiled: the force on a into out (3,); return (F_n N, S_t N/m).
+
+    a, b: [m, s0, E, nu] of each piece; law: [e, mu, k].
+    """
+    out[:] = 0.0
+    dist = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    delta = a[1] + b[1] - dist
+    if delta <= 0.0:
+        return 0.0, 0.0
+    n = d / dist
+    r = a[1] * b[1] / (a[1] + b[1])
+    m = a[0] * b[0] / (a[0] + b[0])
+    y = 1.0 / ((1.0 - a[3] ** 2) / a[2] + (1.0 - b[3] ** 2) / b[2])
+    g = 1.0 / (2.0 * (2.0 - a[3]) * (1.0 + a[3]) / a[2]
+               + 2.0 * (2.0 - b[3]) * (1.0 + b[3]) / b[2])
+    s_n = 2.0 * y * math.sqrt(r * delta)
+    s_t = 8.0 * g * math.sqrt(r * delta)
+    log_e = math.log(law[0])
+    damp = -2.0 * math.sqrt(5.0 / 6.0) * log_e / math.sqrt(log_e * log_e + math.pi * math.pi)
+    v_n = u[0] * n[0] + u[1] * n[1] + u[2] * n[2]
+    f_n = (4.0 / 3.0 * y * math.sqrt(r) * delta ** 1.5 - damp * math.sqrt(s_n * m) * v_n
+           - law[2] * _overlap_area(dist, a[1], b[1]))
+    v_t = u - v_n * n
+    f_t = -s_t * xi - damp * math.sqrt(s_t * m) * v_t
+    cap = law[1] * abs(f_n)
+    size = math.sqrt(xi[0] * xi[0] + xi[1] * xi[1] + xi[2] * xi[2])
+    if s_t * size >= cap:
+        f_t = -cap * xi / size if size > 0.0 else np.zeros(3)
+    else:
+        f_size = math.sqrt(f_t[0] * f_t[0] + f_t[1] * f_t[1] + f_t[2] * f_t[2])
+        if f_size > cap:
+            f_t = f_t * (cap / f_size)
+    for k in range(3):
+        out[k] = f_n * n[k] + f_t[k]
+    return f_n, s_t
+
+
+@numba.njit(cache=True)
+def _omega(table_t: np.ndarray, table_w: np.ndarray, t: float) -> float:
+    """The rotation table's omega at t (rad/s): linear between points, held outside."""
+    if t <= table_t[0]:
+        return table_w[0]
+    for k in range(table_t.shape[0] - 1):
+        if t < table_t[k + 1]:
+            return table_w[k] + (table_w[k + 1] - table_w[k]) * (t - table_t[k]) / (
+                table_t[k + 1] - table_t[k])
+    return table_w[-1]
+
+
+@numba.njit(cache=True)
+def _stage_history(y0, y, i, j, hist, w, tau, out):  # type: ignore[no-untyped-def]
+    """
+    Write into out (3,) the history of pair (i, j) at a stage tau (s) into the step from y0.
+
+    The step's history (hist, at its start) turned with the cone by w tau, plus the
+    relative displacement since the start in the frame turning with the cone, in the
+    tangent plane of the stage (a DEM code increments the history before it computes the
+    step's force; capping is the force's: :func:`pair_force_compiled` slides beyond it).
+    """
+    c, s = math.cos(w * tau), math.sin(w * tau)
+    d0 = np.empty(3)
+    d = np.empty(3)
+    for k in range(3):
+        d0[k] = y0[9 * i + k, 0] - y0[9 * j + k, 0]
+        d[k] = y[9 * i + k, 0] - y[9 * j + k, 0]
+    out[0] = c * hist[0] - s * hist[1] + d[0] - d0[0] + w * tau * 0.5 * (d0[1] + d[1])
+    out[1] = s * hist[0] + c * hist[1] + d[1] - d0[1] - w * tau * 0.5 * (d0[0] + d[0])
+    out[2] = hist[2] + d[2] - d0[2]
+    dist = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    along = (out[0] * d[0] + out[1] * d[1] + out[2] * d[2]) / (dist * dist)
+    for k in range(3):
+        out[k] -= along * d[k]
+
+
+@numba.njit(cache=True)
+def _field(t, tau, y0, y, active, hist, rows, contact, law, cone, literal, tangential,
+           table_t, table_w, out):  # type: ignore[no-untyped-def]
+    """dy/dt (9n, 1) at t + tau of the pieces on the cone with their pair forces."""
+    n = active.shape[0]
+    w = _omega(table_t, table_w, t + tau)
+    w_mid = _omega(table_t, table_w, t + 0.5 * tau)
+    out[:] = 0.0
+    force = np.empty(3)
+    d = np.empty(3)
+    u = np.empty(3)
+    xi = np.empty(3)
+    for p in range(n):
+        if active[p]:
+            piece_rhs_into(out, y, 9 * p, 0, rows[p], cone, w, literal, tangential)
+    for i in range(n):
+        for j in range(i + 1, n):
+            if not (active[i] and active[j]):
+                continue
+            for k in range(3):
+                d[k] = y[9 * i + k, 0] - y[9 * j + k, 0]
+                u[k] = y[9 * i + 3 + k, 0] - y[9 * j + 3 + k, 0]
+            if math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) >= (
+                    contact[i, 1] + contact[j, 1]):
+                continue
+            u[0] += w * d[1]  # relative velocity in the frame turning with the cone
+            u[1] -= w * d[0]
+            _stage_history(y0, y, i, j, hist[i, j], w_mid, tau, xi)
+            pair_force_compiled(contact[i], contact[j], law, d, u, xi, force)
+            for k in range(3):
+                out[9 * i + 3 + k, 0] += force[k] / contact[i, 0]
+                out[9 * j + 3 + k, 0] -= force[k] / contact[j, 0]
+
+
+@numba.njit(cache=True)
+def _cone_dem(rows, contact, law, cone, literal, tangential, y0, table_t, table_w, t_end,
+              dt, r_exit, t_exit, y_end):  # type: ignore[no-untyped-def]
+    n = y0.shape[0]
+    y = y0.reshape(9 * n, 1).copy()
+    active = np.ones(n, dtype=np.bool_)
+    hist = np.zeros((n, n, 3))
+    k1 = np.empty_like(y)
+    k2 = np.empty_like(y)
+    k3 = np.empty_like(y)
+    k4 = np.empty_like(y)
+    stage = np.empty_like(y)
+    force = np.empty(3)
+    zero = np.zeros(3)
+    d = np.empty(3)
+    u = np.empty(3)
+    xi = np.empty(3)
+    steps = int(round(t_end / dt))
+    half = 0.5 * dt
+    for step in range(steps):
+        t = step * dt
+        _field(t, 0.0, y, y, active, hist, rows, contact, law, cone, literal, tangential,
+               table_t, table_w, k1)
+        stage[:] = y + half * k1
+        _field(t, half, y, stage, active, hist, rows, contact, law, cone, literal,
+               tangential, table_t, table_w, k2)
+        stage[:] = y + half * k2
+        _field(t, half, y, stage, active, hist, rows, contact, law, cone, literal,
+               tangential, table_t, table_w, k3)
+        stage[:] = y + dt * k3
+        _field(t, dt, y, stage, active, hist, rows, contact, law, cone, literal,
+               tangential, table_t, table_w, k4)
+        stage[:] = y + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        # the histories at the step's end: incremented, in the tangent plane, capped
+        w_mid = _omega(table_t, table_w, t + half)
+        w = _omega(table_t, table_w, t + dt)
+        for i in range(n):
+            for j in range(i + 1, n):
+                if not (active[i] and active[j]):
+                    continue
+                for k in range(3):
+                    d[k] = stage[9 * i + k, 0] - stage[9 * j + k, 0]
+                    u[k] = stage[9 * i + 3 + k, 0] - stage[9 * j + 3 + k, 0]
+                if math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) >= (
+                        contact[i, 1] + contact[j, 1]):
+                    hist[i, j, :] = 0.0
+                    continue
+                _stage_history(y, stage, i, j, hist[i, j], w_mid, dt, xi)
+                u[0] += w * d[1]
+                u[1] -= w * d[0]
+                f_n, s_t = pair_force_compiled(contact[i], contact[j], law, d, u, zero, force)
+                cap = law[1] * abs(f_n)
+                size = math.sqrt(xi[0] * xi[0] + xi[1] * xi[1] + xi[2] * xi[2])
+                scale = cap / (s_t * size) if s_t * size > cap else 1.0
+                for k in range(3):
+                    hist[i, j, k] = xi[k] * scale
+        for p in range(n):
+            if not active[p]:
+                continue
+            b = 9 * p
+            r_new = math.hypot(stage[b, 0], stage[b + 1, 0])
+            if r_new >= r_exit:
+                r_old = math.hypot(y[b, 0], y[b + 1, 0])
+                theta = (r_exit - r_old) / (r_new - r_old)
+                t_exit[p] = t + theta * dt
+                for k in range(9):
+                    y_end[p, k] = y[b + k, 0] + theta * (stage[b + k, 0] - y[b + k, 0])
+                active[p] = False
+                for q in range(n):
+                    hist[min(p, q), max(p, q), :] = 0.0
+        y[:] = stage
+    for p in range(n):
+        if active[p]:
+            t_exit[p] = np.nan
+            for k in range(9):
+                y_end[p, k] = y[9 * p + k, 0]
+
+
+@dataclass(frozen=True)
+class ConeRun:
+    """What :func:`cone_dem_run` returns: per piece the exit time (s, NaN: stayed), the
+    exit angle (deg, NaN: stayed) and the state at the exit or the end (n, 9) (world)."""
+
+    t_exit: np.ndarray
+    angle_deg: np.ndarray
+    y: np.ndarray
+
+
+def cone_dem_run(params: list[dict], law: Law, y0: np.ndarray, table: list[list[float]],
+                 t_end: float, dt: float = 1.0e-6) -> ConeRun:
+    """
+    Integrate pieces on the turning cone with their pair forces, as a DEM code does.
+
+    params: one reference_model parameter dict per piece (its product and the cone, the
+    same cone for all; young_modulus and poisson_ratio default to the product's 40 kPa and
+    0.45); law: the pair law; y0 (n, 9) world states [q, q_dot, Q_d]; table: the rotation
+    table [[t s, omega rad/s], ...]; dt (s) the fixed step. Pieces that cross the rim are
+    taken out at the crossing (linear within the step), with their pairs.
+    """
+    from reference_model import cone_row, piece_row, readings
+    rows = np.array([piece_row(p) for p in params])
+    contact = np.array([[p['m'], p['s0'], p.get('young_modulus', YOUNG),
+                         p.get('poisson_ratio', POISSON)] for p in params])
+    literal, tangential = readings(params[0])
+    table_arr = np.asarray(table, dtype=float)
+    n = len(params)
+    t_exit = np.empty(n)
+    y_end = np.empty((n, 9))
+    cone = cone_row(params[0])
+    _cone_dem(rows, contact, np.array([law.e, law.mu, law.k]), cone, literal, tangential,
+              np.asarray(y0, dtype=float), table_arr[:, 0].copy(), table_arr[:, 1].copy(),
+              float(t_end), float(dt), float(cone[0]), t_exit, y_end)
+    angle = np.where(np.isnan(t_exit), np.nan,
+                     np.mod(np.degrees(np.arctan2(y_end[:, 1], y_end[:, 0])), 360.0))
+    return ConeRun(t_exit=t_exit, angle_deg=angle, y=y_end)

@@ -15,16 +15,25 @@
 """
 Keep doc/paper_replication.md true: config/paper_table1.yaml and the studies around it.
 
-Every number the page states is checked here. Run the file as a script to print the
-page's tables (the slip-onset study is printed only; it takes about a minute):
+Every number the page states is checked here, against independent references where the
+product's own output would be no check: the exits of pieces alone against the tests' Radau
+reference (reference_model), computed here, and held to the product's promise (0.1 deg,
+2 ms); the exits of pieces that touch against the tests' DEM reference
+(reference_contacts.cone_dem_run). Two references take minutes (a piece riding the cone
+for 16 s, a crowd of 13 for 4.5 s): their values are the references' own, recorded with
+the command that makes them again. Run the file as a script to print the page's tables
+(the slip-onset study is printed only; it takes about a minute), or the recorded
+references (``--reference``, about ten minutes):
 
-    python test/feeder/test_paper_scenario.py
+    python test/feeder/test_paper_scenario.py [--reference]
 """
 
 from collections.abc import Sequence
 from dataclasses import replace
+import functools
 import math
 from pathlib import Path
+import sys
 from typing import Any
 
 from cone_feeder_sim.feeder.runner import run_scenario
@@ -34,6 +43,8 @@ from cone_feeder_sim.physics.simulation import resting_height
 from cone_feeder_sim.physics.simulation import SimParams, Simulator
 import numpy as np
 import pytest
+import reference_contacts
+import reference_model
 
 CONFIG = Path(__file__).resolve().parents[2] / 'config'
 SCENARIO = CONFIG / 'paper_table1.yaml'
@@ -45,22 +56,23 @@ TABLE_III = {1: (70.0, 2), 2: (62.0, 2), 3: (93.8, 1), 4: (287.4, 10), 5: (119.0
 DIRECTION = {1: -1.0, 2: -1.0, 3: -1.0, 4: 1.0, 5: 1.0}
 OMEGA_MAX = 10.47  # rad/s (100 rpm), end speed of the ramp studies
 
-# what the page reports for config/paper_table1.yaml: exit time (s), angle (deg), channel
+# what the page reports for config/paper_table1.yaml: exit time (s), angle (deg), channel,
+# each the Radau reference's, rounded
 SCENARIO_EXITS = {1: (0.954, 36.1, 3), 2: (0.967, 223.7, 10), 3: (1.058, 277.1, 8),
                   4: (1.364, 359.7, 5), 5: (4.093, 245.0, 9)}
 # the same scenario with friction_direction: tangential, solved with TIGHT tolerances (at the
 # default ones its exit angles move by up to 11 deg with the output interval, 0.01..0.1 s)
 TIGHT = {'rtol': 1.0e-8, 'atol_position': 1.0e-10, 'atol_velocity': 1.0e-9,
          'atol_force': 1.0e-8}
-TANGENTIAL_EXITS = {1: (1.157, 289.1, 7), 2: (1.177, 113.5, 14), 3: (0.936, 337.0, 6),
-                    4: (4.835, 98.9, 1), 5: (0.653, 201.1, 11)}
+TANGENTIAL_EXITS = {1: (1.157, 289.1, 7), 2: (1.177, 113.4, 14), 3: (0.936, 337.0, 6),
+                    4: (4.835, 99.0, 1), 5: (0.653, 201.1, 11)}
 # ramp times (s) of a ramp from rest to DIRECTION * OMEGA_MAX fitted to Table I, per sample
 FITTED_RAMP = {'1a': 0.6354, '1b': 1.7767, '2a': 1.0942, '2b': 2.5491, '3': 1.5629,
                '5': 1.6057}
 # angle (deg) and channel of every sample under each fitted ramp time (fit: zero residual)
 CROSS = {
     '1a': {1: (69.5, 2), 2: (260.0, 9), 3: (271.3, 8), 4: (301.5, 7), 5: (260.4, 9)},
-    '1b': {1: (69.5, 2), 2: (254.3, 9), 3: (51.5, 3), 4: (342.0, 5), 5: (152.4, 13)},
+    '1b': {1: (69.5, 2), 2: (254.3, 9), 3: (51.4, 3), 4: (342.0, 5), 5: (152.4, 13)},
     '2a': {1: (227.7, 10), 2: (63.5, 2), 3: (184.6, 12), 4: (212.4, 10), 5: (2.8, 5)},
     '2b': {1: (250.5, 9), 2: (63.5, 2), 3: (256.9, 9), 4: (253.9, 9), 5: (319.4, 6)},
     '3': {1: (118.7, 14), 2: (306.9, 7), 3: (93.6, 1), 4: (184.9, 12), 5: (105.9, 1)},
@@ -76,6 +88,50 @@ Exit = tuple[float, float, int]
 def wrap(angle: float) -> float:
     """Return an angle difference (deg) wrapped into [-180, 180)."""
     return (angle + 180.0) % 360.0 - 180.0
+
+
+#: The Radau reference's relative tolerance here: with its absolute ones (1e-12 m ...) it
+#: gives the exits of rtol 1e-10 to 1e-4 deg and 1e-5 s on every run of this file
+#: (measured on the scenario, its tangential reading and the fitted ramps), five times faster.
+REFERENCE_RTOL = 1.0e-5
+#: The product's promise against the reference: exit angle and exit time.
+ANGLE_TOL, TIME_TOL = 0.1, 2.0e-3
+
+
+@functools.cache
+def reference_exit(sample: int, rotation: tuple[tuple[float, float], ...], t_end: float,
+                   reading: str = 'full') -> Exit | None:
+    """Return the Radau reference's exit of a sample alone from its Table I start, or None."""
+    p = reference_model.table2_params(sample, friction_direction=reading)
+    y0 = reference_model.initial_state_on_feeder(reference_model.TABLE1_STARTS[sample],
+                                                 rotation[0][1])
+    run = reference_model.reference_trajectory(p, y0, [list(r) for r in rotation], t_end,
+                                               rtol=REFERENCE_RTOL)
+    if not run.exited:
+        return None
+    return run.t_exit, run.angle_deg, reference_model.channel_of_angle(run.angle_deg)
+
+
+def scenario_rotation() -> tuple[tuple[float, float], ...]:
+    """Return config/paper_table1.yaml's rotation table, hashable."""
+    return tuple((float(t), float(w)) for t, w in read_yaml(SCENARIO)['rotation'])
+
+
+def assert_held_to(exits: dict[int, Exit], reference: dict[int, Exit]) -> None:
+    """Assert the product's exits within 0.1 deg and 2 ms of the reference's."""
+    assert exits.keys() == reference.keys()
+    for s, (t, angle, _) in reference.items():
+        assert abs(exits[s][0] - t) <= TIME_TOL, (s, exits[s], reference[s])
+        assert abs(wrap(exits[s][1] - angle)) <= ANGLE_TOL, (s, exits[s], reference[s])
+
+
+def assert_documented(documented: dict[int, Exit], reference: dict[int, Exit]) -> None:
+    """Assert the page's exits (3 decimals in s, 1 in deg) are the reference's, rounded."""
+    for s, (t, angle, channel) in documented.items():
+        assert abs(reference[s][0] - t) <= 0.0005 + 1e-9, (s, documented[s], reference[s])
+        assert abs(wrap(reference[s][1] - angle)) <= 0.05 + 1e-9, (s, documented[s],
+                                                                   reference[s])
+        assert reference[s][2] == channel, (s, documented[s], reference[s])
 
 
 def ramp(t_ramp: float, omega: float) -> list[list[float]]:
@@ -261,11 +317,9 @@ def test_scenario_exits_as_documented() -> None:
     table = result.exit_table()
     exits = {int(i) + 1: (float(t), float(a), int(c)) for i, t, a, c in zip(
         table['ids'], table['t'], table['angle_deg'], table['channel'])}
-    assert set(exits) == set(SAMPLES)
-    for s, (t, angle, channel) in SCENARIO_EXITS.items():
-        assert exits[s][0] == pytest.approx(t, abs=0.005)
-        assert abs(wrap(exits[s][1] - angle)) < 0.3
-        assert exits[s][2] == channel
+    reference = {s: reference_exit(s, scenario_rotation(), scenario.duration) for s in SAMPLES}
+    assert_held_to(exits, reference)
+    assert_documented(SCENARIO_EXITS, reference)
     # samples 1-4 leave under clockwise rotation, sample 5 under counter-clockwise
     phases = [scenario.rotation.omega(exits[s][0]) for s in SAMPLES]
     assert all(w < 0.0 for w in phases[:4]) and phases[4] > 0.0
@@ -308,9 +362,11 @@ def test_d_splits_samples_3_and_5() -> None:
 
 def test_tangential_reading_of_the_scenario() -> None:
     exits = tangential_run()
-    for s, (t, angle, channel) in TANGENTIAL_EXITS.items():
-        assert exits[s][0] == pytest.approx(t, abs=0.005)
-        assert abs(wrap(exits[s][1] - angle)) < 0.3 and exits[s][2] == channel
+    duration = float(read_yaml(SCENARIO)['duration'])
+    reference = {s: reference_exit(s, scenario_rotation(), duration, 'tangential')
+                 for s in SAMPLES}
+    assert_held_to(exits, reference)
+    assert_documented(TANGENTIAL_EXITS, reference)
 
 
 def test_decompression_on_a_stationary_cone() -> None:
@@ -323,11 +379,46 @@ def test_decompression_on_a_stationary_cone() -> None:
     np.testing.assert_allclose(gap, 0.02334, atol=1e-4)
 
 
+#: The Radau reference's exit time (s) of a piece laid at rest at rho = 0.11 m on a cone
+#: ramped at 0.5 rad/s^2, per d: ``python test/feeder/test_paper_scenario.py --reference``
+#: (rtol 1e-7, about 110 s each: 16 s of riding with the cone). The page: 8.17 / 8.24 / 8.30.
+REST_EXIT_REFERENCE = {30.0: 16.3489, 225.0: 16.4831, 750.0: 16.6050}
+
+
+def rest_reference(d: float, rtol: float = 1.0e-7) -> float:
+    """Return the Radau reference's exit time (s) of REST_EXIT_REFERENCE's run for d."""
+    content = at_rest(0.11, d)
+    scenario = scenario_from_mapping(content, base_dir=CONFIG)
+    start = scenario.particles[0].position
+    p = reference_model.table2_params(1, d=d)
+    run = reference_model.reference_trajectory(
+        p, reference_model.initial_state_on_feeder(start, 0.0), content['rotation'], 20.0,
+        rtol=rtol)
+    return run.t_exit
+
+
+#: Tolerances that resolve the friction filter's oscillation of a piece riding the cone
+#: (atol_velocity 1e-8 m/s; the defaults' 1e-5 damp it: doc/model.md, "Accuracy").
+RIDING = {'atol_velocity': 1.0e-8}
+
+
 def test_slip_of_a_piece_placed_at_rest() -> None:
     # at rho = 0.11 m on a cone ramped at 0.5 rad/s^2 a piece leaves at 8.17..8.30 rad/s
-    for d, omega in ((30.0, 8.17), (225.0, 8.24), (750.0, 8.30)):
+    for (d, t_ref), omega in zip(REST_EXIT_REFERENCE.items(), (8.17, 8.24, 8.30)):
+        content = at_rest(0.11, d, duration=20.0)
+        content['solver'] = RIDING
+        exits = run_exits(content, [1])
+        assert abs(exits[1][0] - t_ref) <= TIME_TOL, (d, exits[1], t_ref)
+        assert round(0.5 * t_ref, 2) == omega  # the page's figure is the reference's
+
+
+@pytest.mark.xfail(strict=True, reason='the default tolerances damp the oscillation of the '
+                   'friction filter of a piece riding the cone for 16 s: it creeps 30 % '
+                   'further and leaves 5 ms early (doc/model.md, "Accuracy")')
+def test_a_piece_riding_16_s_at_the_default_tolerances() -> None:
+    for d, t_ref in REST_EXIT_REFERENCE.items():
         exits = run_exits(at_rest(0.11, d, duration=20.0), [1])
-        assert round(0.5 * exits[1][0], 2) == omega
+        assert abs(exits[1][0] - t_ref) <= TIME_TOL, (d, exits[1], t_ref)
 
 
 def test_samples_3_and_5_co_rotate_above_the_rest_threshold() -> None:
@@ -343,9 +434,17 @@ def test_sensitivity_to_the_ramp_time() -> None:
                            5: (21.4, 22.4)}.items():
         step = -np.array([wrap(b - a) for a, b in zip(angles[s][:-1], angles[s][1:])])
         assert np.all((step[slow] > low - 0.1) & (step[slow] < high + 0.1)), (s, step[slow])
-    # samples 1 and 2 never leave within a channel width of each other under one ramp
+    # samples 1 and 2 never leave within a channel width of each other under one ramp: the
+    # closest they come (the page: 162.3 deg), at the reference's angles of that ramp
     separation = np.abs([wrap(a - b) for a, b in zip(angles[1], angles[2])])
-    assert separation.min() == pytest.approx(162.3, abs=0.2)
+    closest = int(np.argmin(separation))
+    t_ramp = float(times[closest])
+    rotation = ((0.0, 0.0), (t_ramp, -OMEGA_MAX))
+    first, second = (reference_exit(s, rotation, t_ramp + 6.0) for s in (1, 2))
+    assert abs(wrap(first[1] - angles[1][closest])) <= ANGLE_TOL
+    assert abs(wrap(second[1] - angles[2][closest])) <= ANGLE_TOL
+    assert abs(wrap(first[1] - second[1])) == pytest.approx(162.3, abs=0.05)
+    assert separation.min() > 360.0 / 14
 
 
 def test_one_history_can_put_samples_1_and_2_in_one_channel() -> None:
@@ -364,9 +463,13 @@ def test_one_history_can_put_samples_1_and_2_in_one_channel() -> None:
 @pytest.mark.parametrize('name', ['1b', '3', '5'])
 def test_fitted_ramp_times(name: str) -> None:
     exits = fitted_run(name)
+    t_ramp = FITTED_RAMP[name]
+    reference = {s: reference_exit(s, ((0.0, 0.0), (t_ramp, DIRECTION[s] * OMEGA_MAX)),
+                                   t_ramp + 6.0) for s in SAMPLES}
+    assert_held_to(exits, reference)
     for s, (angle, channel) in CROSS[name].items():
-        assert abs(wrap(exits[s][1] - angle)) < 0.3, (s, exits[s])
-        assert exits[s][2] == channel
+        assert abs(wrap(reference[s][1] - angle)) <= 0.05 + 1e-9, (s, reference[s])
+        assert reference[s][2] == channel
 
 
 def test_sample_4_sticks_only_below_5_rad_s() -> None:
@@ -433,13 +536,41 @@ CONTACT_EXITS = {1: (0.979, 23.2, 4), 2: (0.967, 223.7, 10), 3: (1.058, 277.1, 8
 #: Exits of the samples with neighbours arranged by seed 0.
 NEIGHBOURS_SEED_0 = {1: (4.438, 81.0, 2), 2: (0.987, 213.8, 10), 3: (1.058, 277.3, 8),
                      4: (1.364, 359.7, 5), 5: (4.102, 251.0, 9)}
+#: The DEM reference's exits of the samples with the neighbours of seed 0 (t s, angle deg,
+#: channel), step 4e-6 s: ``python test/feeder/test_paper_scenario.py --reference`` (14 s
+#: here: 13 pieces for 4.5 s).
+NEIGHBOURS_SEED_0_REFERENCE = {1: (4.4383, 80.995, 2), 2: (0.9870, 213.817, 10),
+                               3: (1.0578, 277.304, 8), 4: (1.3644, 359.669, 5),
+                               5: (4.1022, 251.001, 9)}
+#: The DEM reference's fixed step (s) here: halving it moves the samples' exits by at most
+#: 0.016 deg and 0.01 ms (the contact of samples 1 and 5; measured to 1e-6 s).
+DEM_STEP = 4.0e-6
+
+
+def dem_exits(content: dict[str, Any], t_end: float) -> dict[int, Exit]:
+    """Return the DEM reference's exits of the five samples (ids 0-4) of scenario content."""
+    scenario = scenario_from_mapping(content, base_dir=CONFIG)
+    params = [reference_model.table2_params(1, d=spec.product.d)
+              for spec in scenario.particles]
+    y0 = np.array([reference_model.initial_state_on_feeder(spec.position, 0.0)
+                   for spec in scenario.particles])
+    law = reference_contacts.Law(e=scenario.model.interactions.restitution,
+                                 mu=scenario.model.interactions.friction,
+                                 k=reference_contacts.density_for(
+                                     scenario.model.interactions.pull_off))
+    table = [[float(t), float(w)] for t, w in content['rotation']]
+    run = reference_contacts.cone_dem_run(params, law, y0, table, t_end, DEM_STEP)
+    return {i + 1: (float(t), float(a), reference_model.channel_of_angle(float(a)))
+            for i, (t, a) in enumerate(zip(run.t_exit[:5], run.angle_deg[:5]))
+            if not math.isnan(t)}
 
 
 def assert_exits(exits: dict[int, Exit], expected: dict[int, Exit]) -> None:
+    """Assert exits are the page's (3 decimals in s, 1 in deg, the channel)."""
     assert exits.keys() == expected.keys()
     for s, (t, angle, channel) in expected.items():
-        assert exits[s][0] == pytest.approx(t, abs=1e-3)
-        assert exits[s][1] == pytest.approx(angle, abs=0.1)
+        assert exits[s][0] == pytest.approx(t, abs=5e-4 + 1e-9)
+        assert abs(wrap(exits[s][1] - angle)) <= 0.05 + 1e-9
         assert exits[s][2] == channel
 
 
@@ -447,7 +578,9 @@ def test_contact_between_the_samples_themselves() -> None:
     # samples 2 and 4 start 58 mm apart and 1 and 5 meet on the way: with contact alone
     # (the soft-sphere law), 1 knocks 5 off its slow path and 5 leaves in the first
     # clockwise phase instead of the second; 1 is deflected by 13 degrees
-    exits = sample_exits(with_neighbours(None))
+    content = with_neighbours(None)
+    exits = sample_exits(content)
+    assert_held_to(exits, dem_exits(content, 1.5))
     assert_exits(exits, CONTACT_EXITS)
     paper = run_exits(variant())
     assert exits[3] == pytest.approx(paper[3], abs=1e-3)  # the one that touches nobody
@@ -455,7 +588,18 @@ def test_contact_between_the_samples_themselves() -> None:
 
 
 def test_neighbours_move_the_exits_as_documented() -> None:
-    assert_exits(sample_exits(with_neighbours(0)), NEIGHBOURS_SEED_0)
+    exits = sample_exits(with_neighbours(0))
+    assert_held_to(exits, NEIGHBOURS_SEED_0_REFERENCE)
+    assert_exits(exits, NEIGHBOURS_SEED_0)
+
+
+def print_references() -> None:
+    """Print the references this file records (minutes): REST_EXIT_REFERENCE and the DEM's."""
+    for d in REST_EXIT_REFERENCE:
+        print(f'REST_EXIT_REFERENCE[{d}]: {rest_reference(d):.4f} s', flush=True)
+    exits = dem_exits(with_neighbours(0), 4.5)
+    print('NEIGHBOURS_SEED_0_REFERENCE = {' + ', '.join(
+        f'{s}: ({t:.4f}, {a:.3f}, {c})' for s, (t, a, c) in sorted(exits.items())) + '}')
 
 
 def main() -> None:
@@ -521,4 +665,4 @@ def main() -> None:
 
 
 if __name__ == '__main__':
-    main()
+    print_references() if sys.argv[1:] == ['--reference'] else main()
