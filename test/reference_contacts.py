@@ -248,7 +248,7 @@ def pair_force_compiled(a: np.ndarray, b: np.ndarray, law: np.ndarray, d: np.nda
 
 @numba.njit(cache=True)
 def _omega(table_t: np.ndarray, table_w: np.ndarray, t: float) -> float:
-    """The rotation table's omega at t (rad/s): linear between points, held outside."""
+    """Return the rotation table's omega at t (rad/s): linear between points, held outside."""
     if t <= table_t[0]:
         return table_w[0]
     for k in range(table_t.shape[0] - 1):
@@ -397,8 +397,12 @@ def _cone_dem(rows, contact, law, cone, literal, tangential, y0, table_t, table_
 
 @dataclass(frozen=True)
 class ConeRun:
-    """What :func:`cone_dem_run` returns: per piece the exit time (s, NaN: stayed), the
-    exit angle (deg, NaN: stayed) and the state at the exit or the end (n, 9) (world)."""
+    """
+    What :func:`cone_dem_run` returns.
+
+    Per piece the exit time (s, NaN: stayed), the exit angle (deg, NaN: stayed) and the
+    state at the exit or at the end, (n, 9), world frame.
+    """
 
     t_exit: np.ndarray
     angle_deg: np.ndarray
