@@ -84,3 +84,31 @@ def shared(function: Callable[..., T]) -> Callable[..., T]:
                 partial.replace(path)
         return pickle.loads(path.read_bytes())
     return functools.cache(wrapper)
+
+
+def with_threads(threads: int, module: str, function: str, out: Path) -> dict[str, Any]:
+    """
+    Return ``module.function()`` (a dict of arrays) computed in a new process on ``threads``.
+
+    The process starts with ``NUMBA_NUM_THREADS`` = threads and uses all of them, whatever
+    this one (an xdist worker at one thread) or the machine (one CPU) has: a test that
+    compares thread counts then compares two counts for real. out: the file (.npz) the
+    arrays come back in.
+    """
+    import subprocess
+    import sys
+
+    import numpy as np
+    test_dir = Path(__file__).resolve().parent
+    path = [str(test_dir), str(test_dir / module.split('.')[0])]
+    code = (f'import sys; sys.path[:0] = {path!r}\n'
+            f'import numba, numpy\nnumba.set_num_threads({threads})\n'
+            f'assert numba.get_num_threads() == {threads}\n'
+            f'from {module.split(".")[-1]} import {function}\n'
+            f'numpy.savez({str(out)!r}, **{function}())\n')
+    env = {**os.environ, 'NUMBA_NUM_THREADS': str(threads)}
+    done = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    with np.load(out) as arrays:
+        return {name: arrays[name] for name in arrays.files}

@@ -41,6 +41,7 @@ readable message, is refused with an error and exit status 1. Without ``loop`` t
 exits when the last message is out.
 """
 
+from collections.abc import Callable
 import importlib
 import json
 import sys
@@ -95,8 +96,14 @@ def _ns_time(ns: int) -> Time:
 class ReplayNode(GuardedNode):
     """Republish a recording with its timing; see the module documentation."""
 
-    def __init__(self, **kwargs: Any) -> None:
-        """Read the parameters, open the recording and create the publishers."""
+    def __init__(self, clock_ns: Callable[[], int] = time.monotonic_ns,
+                 **kwargs: Any) -> None:
+        """
+        Read the parameters, open the recording and create the publishers.
+
+        clock_ns: the steady wall clock (ns) the timing follows (the tests' is made up).
+        """
+        self._clock_ns = clock_ns
         super().__init__(NODE_NAME, **kwargs)
 
     def _declare(self, name: str, default: Any, description: str,
@@ -226,13 +233,14 @@ class ReplayNode(GuardedNode):
         self._iter = self._recording.messages(set(self._outputs), self._start_ns,
                                               self._end_ns)
         self._next = next(self._iter, None)
-        self._wall0 = time.monotonic_ns() + int(round(delay * 1e9))
+        self._wall0 = self._clock_ns() + int(round(delay * 1e9))
 
     def _due(self, message: RecordedMessage) -> int:
+        """Return when (clock_ns) a message is due: (log time - start) / rate after the start."""
         return self._wall0 + int((message.log_time_ns - self._start_ns) / self._rate)
 
     def _on_play(self) -> None:
-        now = time.monotonic_ns()
+        now = self._clock_ns()
         count = 0
         while self._next is not None and count < _BATCH:
             message = self._next
@@ -251,7 +259,7 @@ class ReplayNode(GuardedNode):
             else:
                 self._finish()
                 return
-        wait = self._due(self._next) - time.monotonic_ns()
+        wait = self._due(self._next) - self._clock_ns()
         self._play_timer.timer_period_ns = max(wait, _MIN_PERIOD_NS)
         self._play_timer.reset()
 

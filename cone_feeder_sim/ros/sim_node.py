@@ -32,6 +32,7 @@ the start of the next tick; every input the engine applied is published on ``~/e
 with its tick index, so that a recording can be re-simulated exactly.
 """
 
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 import sys
@@ -74,8 +75,13 @@ NODE_NAME = 'sim_node'
 class SimNode(GuardedNode):
     """The cone feeder simulator as a ROS 2 node; see the module documentation."""
 
-    def __init__(self, **kwargs: Any) -> None:
-        """Declare the parameters, build the engine and create every ROS handle."""
+    def __init__(self, clock: Callable[[], float] = time.perf_counter, **kwargs: Any) -> None:
+        """
+        Declare the parameters, build the engine and create every ROS handle.
+
+        clock: the steady wall clock (s) the pacing follows (the tests' is made up).
+        """
+        self._wall_clock = clock
         super().__init__(NODE_NAME, **kwargs)
 
     def _setup(self) -> None:
@@ -113,7 +119,7 @@ class SimNode(GuardedNode):
                                                   float(values['real_time_factor']),
                                                   float(values['catch_up'])),
                               done=lambda: self._job_done.trigger(),
-                              before_tick=self._before_tick)
+                              before_tick=self._before_tick, clock=self._wall_clock)
         #: marker rate changes (from tick index, rate): the worker may be ticks ahead of those
         self._marker_rates: list[tuple[int, float]] = []
         self._paused = False
@@ -481,7 +487,7 @@ class SimNode(GuardedNode):
             self._outputs.publish(self._pub[name], message, t_ns)
 
     def _publish_diagnostics(self) -> None:
-        now = time.perf_counter()
+        now = self._wall_clock()
         self._outputs.publish(self._pub['/diagnostics'], diagnostics_message(
             self.get_fully_qualified_name(), self._ticker.window, now, self._engine,
             self._ticker.pacer, self._paused, self._totals, self._recording.recorder,

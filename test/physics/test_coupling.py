@@ -20,6 +20,8 @@ here crowds on the cone: the two couplings agree, momentum and histories are kep
 do not depend on the thread count, mirrored crowds mirror and a pile settles.
 """
 
+from pathlib import Path
+
 from cone_feeder_sim.errors import ParameterError
 from cone_feeder_sim.physics import (coupling, exact, integrator, model, neighbours,
                                      rosenbrock)
@@ -33,6 +35,7 @@ from cone_feeder_sim.weigher import combination
 import numba
 import numpy as np
 import pytest
+from workers import with_threads
 
 STILL = [[0.0, 0.0], [100.0, 0.0]]
 TURNING = [[0.0, 0.0], [0.4, -8.0], [5.0, -8.0]]
@@ -165,19 +168,25 @@ def test_momentum_of_a_crowd_in_free_flight_is_kept_to_round_off() -> None:
     assert touching >= 5
 
 
-def test_the_result_is_the_same_on_any_number_of_threads() -> None:
+def turning_crowd() -> dict[str, np.ndarray]:
+    """Return the state and contact histories of the crowd after 0.1 s on the turning cone."""
     m = contact()
-    positions = crowd(m)
+    result, _ = run(m, TURNING, crowd(m), 0.1)
+    return {'y': result.state.y, 'history': result.state.contact_history}
+
+
+def test_the_result_is_the_same_on_any_number_of_threads(tmp_path: Path) -> None:
+    # one thread here; three in a process of its own (whatever this one or the machine has)
     threads = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        a, _ = run(m, TURNING, positions, 0.1)
-        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
-        b, _ = run(m, TURNING, positions, 0.1)
+        one = turning_crowd()
     finally:
         numba.set_num_threads(threads)
-    np.testing.assert_array_equal(a.state.y, b.state.y)
-    np.testing.assert_array_equal(a.state.contact_history, b.state.contact_history)
+    three = with_threads(3, 'physics.test_coupling', 'turning_crowd', tmp_path / 'three.npz')
+    assert one['history'].shape[0] > 0
+    np.testing.assert_array_equal(three['y'], one['y'])
+    np.testing.assert_array_equal(three['history'], one['history'])
 
 
 def test_a_mirrored_crowd_under_mirrored_rotation_mirrors() -> None:

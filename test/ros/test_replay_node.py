@@ -118,6 +118,31 @@ def test_replays_in_order_with_the_recorded_timing_scaled_by_rate(
     assert node.published == COUNT and node.progress() == 1.0
 
 
+@pytest.mark.parametrize('rate', [1.0, 2.5])
+def test_each_message_is_due_at_its_recorded_time_over_the_rate(
+        ros: Ros, tmp_path: Path, rate: float) -> None:
+    # on a made-up steady clock: message k is published when the clock reaches
+    # start + delay + k * step / rate, not a nanosecond before
+    now = [10 ** 12]
+    path = synthetic(tmp_path / 'counter.mcap')
+    counter = ros.listen(Float64, '/counter')
+    overrides = [Parameter('path', value=str(path)), Parameter('rate', value=rate),
+                 Parameter('delay', value=0.1)]
+    node = ros.add(ReplayNode(context=ros.context, parameter_overrides=overrides,
+                              clock_ns=lambda: now[0]))
+    start = now[0] + 100_000_000
+    for k in (0, 1, 2, 16, COUNT - 1):
+        due = start + int(k * STEP_NS / rate)
+        now[0] = due - 1
+        assert ros.spin_until(lambda k=k: node.published >= k, 10.0)
+        ros.spin_for(0.05)
+        assert node.published == k, (k, node.published)  # not due yet
+        now[0] = due
+        assert ros.spin_until(lambda k=k: node.published == k + 1, 10.0), k
+    assert ros.spin_until(lambda: len(counter) == COUNT and node.done.done(), 10.0)
+    assert values(counter) == [float(i) for i in range(COUNT)]
+
+
 def test_offsets_inputs_and_clock(ros: Ros, tmp_path: Path) -> None:
     path = synthetic(tmp_path / 'counter.mcap')
     counter = ros.listen(Float64, '/counter')

@@ -21,12 +21,14 @@ schemas and decodes the CDR) and with the mcap package (metadata, summary).
 
 from collections.abc import Callable, Iterator
 import dataclasses
+import errno
 import json
 import os
 from pathlib import Path
 from typing import Any
 
 from cone_feeder_sim.errors import RecordingError
+from cone_feeder_sim.formats import mcap_writer
 from cone_feeder_sim.formats.mcap_reader import open_recording
 from cone_feeder_sim.formats.runlog import END_METADATA_NAME, INPUT_EVENTS, METADATA_NAME
 from cone_feeder_sim.ros.parameters import parameter_specs
@@ -319,15 +321,25 @@ def test_unwritable_record_path_is_refused_at_start(ros: Ros, tmp_path: Path) ->
         ros.sim(namespace='/proc_test', record_path='/proc/run.mcap')
 
 
-def test_read_only_directory_is_refused_at_start(ros: Ros, tmp_path: Path) -> None:
+def test_read_only_directory_is_refused_at_start(ros: Ros, tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    # a directory this user may not write into: the file's open fails with EACCES. Root may
+    # write anywhere, so the error is also injected where the recorder opens the file
     readonly = tmp_path / 'readonly'
     readonly.mkdir()
     readonly.chmod(0o500)
+    real_open = open
+
+    def refusing(file: Any, mode: str = 'r', *args: Any, **kwargs: Any) -> Any:
+        if Path(file).parent == readonly and set(mode) & set('wax+'):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(file))
+        return real_open(file, mode, *args, **kwargs)
+
+    monkeypatch.setattr(mcap_writer, 'open', refusing, raising=False)
     try:
-        if os.access(readonly, os.W_OK):
-            pytest.skip('this user can write into read-only directories (root)')
         with pytest.raises(RecordingError, match='Permission denied'):
             ros.sim(record_path=str(readonly / 'run.mcap'))
+        assert not (readonly / 'run.mcap').exists()
     finally:
         readonly.chmod(0o700)
 
