@@ -64,8 +64,12 @@ SCHEMA_ENCODING = 'ros2msg'
 MESSAGE_ENCODING = 'cdr'
 LIBRARY = 'cone_feeder_sim'
 
-#: Bytes of a Message record besides its data (opcode, length, ids and times).
-_MESSAGE_RECORD_OVERHEAD = 31
+#: Bytes a message adds to the file besides its data: its Message record's opcode, length,
+#: ids and times (31), and its entry in the chunk's MessageIndex (16: log time, offset).
+_MESSAGE_RECORD_OVERHEAD = 31 + 16
+#: Bytes of a Schema and of a Channel record besides their strings and data.
+_SCHEMA_RECORD_OVERHEAD = 25
+_CHANNEL_RECORD_OVERHEAD = 60
 #: Chunk size handed to mcap's Writer: chunks are ended by the recorder instead.
 _NEVER = 2 ** 62
 
@@ -155,6 +159,7 @@ class McapRecorder:
             raise
         self._chunk_size = chunk_size
         self._pending_bytes = 0
+        self._chunk_messages = 0
         self._last_flush = self._clock()
 
     @property
@@ -164,7 +169,8 @@ class McapRecorder:
 
     @property
     def size_bytes(self) -> int:
-        """Return the bytes in the file so far plus those of the open chunk (uncompressed)."""
+        """Return the bytes in the file so far plus those of the open chunk (uncompressed, with
+        its message index)."""
         with self._lock:
             return self._stream.tell() + self._pending_bytes
 
@@ -207,12 +213,17 @@ class McapRecorder:
                     text = self._codec.registry.full_text(canonical)
                 except MessageDefinitionError as err:
                     raise RecordingError(f'cannot record topic {topic!r}: {err}') from err
+                data = text.encode('utf-8')
                 schema_id = self._writer.register_schema(
-                    name=canonical, encoding=SCHEMA_ENCODING, data=text.encode('utf-8'))
+                    name=canonical, encoding=SCHEMA_ENCODING, data=data)
                 self._schemas[canonical] = schema_id
+                # the schema goes into the open chunk: it counts towards the file's size
+                self._pending_bytes += len(data) + len(canonical) + _SCHEMA_RECORD_OVERHEAD
+            qos_yaml = profile.to_yaml()
             channel_id = self._writer.register_channel(
                 topic=topic, message_encoding=MESSAGE_ENCODING, schema_id=schema_id,
-                metadata={'offered_qos_profiles': profile.to_yaml()})
+                metadata={'offered_qos_profiles': qos_yaml})
+            self._pending_bytes += len(topic) + len(qos_yaml) + _CHANNEL_RECORD_OVERHEAD
             self._channels[topic] = channel_id
             self._channel_types[topic] = canonical
             self._sequences[channel_id] = 0
@@ -251,6 +262,7 @@ class McapRecorder:
                 channel_id=channel_id, log_time=log_time, data=data,
                 publish_time=publish_time, sequence=sequence)
             self._message_count += 1
+            self._chunk_messages += 1
             self._pending_bytes += len(data) + _MESSAGE_RECORD_OVERHEAD
             if self._pending_bytes >= self._chunk_size:
                 self.flush()
@@ -281,7 +293,9 @@ class McapRecorder:
             self._check_open()
             self._writer.flush()
             self._flush_stream()
-            self._pending_bytes = 0
+            if self._chunk_messages:  # a chunk without messages stays open (mcap's Writer)
+                self._pending_bytes = 0
+                self._chunk_messages = 0
             self._last_flush = self._clock()
 
     def _flush_stream(self) -> None:

@@ -430,3 +430,17 @@ def test_cli_report(sample: tuple[SampleRun, Path], tmp_path: Path,
     bad.write_text('no')
     assert main(['report', str(bad), '--out', str(out)]) == 2
     assert 'is not an MCAP file' in capsys.readouterr().err
+
+
+def test_a_report_never_overwrites_its_recording(sample: tuple[SampleRun, Path],
+                                                 tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture) -> None:
+    _, path = sample
+    before = path.read_bytes()
+    link = tmp_path / 'link.mcap'
+    link.symlink_to(path)
+    for out in (str(path), f'{path.parent}/./{path.name}', str(link)):  # one file, 3 names
+        assert main(['report', str(path), '--out', out]) == 2
+        err = capsys.readouterr().err
+        assert err.count('\n') == 1 and f'would overwrite the recording {path}' in err
+        assert path.read_bytes() == before  # byte for byte

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from cone_feeder_sim.errors import RecordingError
-from cone_feeder_sim.formats import mcap_writer
+from cone_feeder_sim.formats import mcap_writer, run_recorder
 from cone_feeder_sim.formats.mcap_reader import open_recording
 from cone_feeder_sim.formats.runlog import END_METADATA_NAME, INPUT_EVENTS, METADATA_NAME
 from cone_feeder_sim.ros.parameters import parameter_specs
@@ -36,6 +36,8 @@ from cone_feeder_sim.ros.sim_node import SimNode
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray
 import mcap.reader
+from mcap.records import Chunk, Footer
+from mcap.stream_reader import StreamReader
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -309,6 +311,54 @@ def test_record_path_default_template_and_off(
     assert sorted(p.name for p in (tmp_path / 'runs').iterdir()) == sorted(
         [first.recording_path.name, second.recording_path.name])
     assert len(read_bag(first.recording_path)['/a/particle_states']) == 1
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'lz4', 'none'])
+def test_compression_and_file_size_are_the_node_s_parameters(
+        ros: Ros, tmp_path: Path, compression: str) -> None:
+    # record_compression and record_max_file_size set through the node: every chunk of
+    # every part is compressed so, and the run is split into parts of at most that size
+    path = tmp_path / 'run.mcap'
+    sim = ros.sim(record_path=str(path), real_time_factor=0.0, record_compression=compression,
+                  record_max_file_size=150_000, **{'feed.rate': 20.0})
+    assert ros.spin_until(lambda: len(sim.recording.paths) >= 3, 60.0)
+    sim.close_recording()
+    paths = sim.recording.paths
+    for part in paths:
+        with part.open('rb') as stream:
+            chunks = [r for r in StreamReader(stream, emit_chunks=True).records
+                      if isinstance(r, Chunk)]
+        assert chunks and {c.compression for c in chunks} == {
+            '' if compression == 'none' else compression}
+    # a part's data ends before the message that would take it past the size (its index
+    # and summary come after: the file is a little larger, as rosbag2's are)
+    for part in paths[:-1]:
+        with part.open('rb') as stream:
+            footer = [r for r in StreamReader(stream, emit_chunks=True).records
+                      if isinstance(r, Footer)][-1]
+        assert footer.summary_start <= 150_000 + 2_000, (part, footer)
+    assert sum(len(v) for p in paths for v in read_bag(p).values()) > 0
+
+
+def test_min_free_space_is_the_node_s_parameter(ros: Ros, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    # more free space asked for than any disk has: the start is refused, no file left
+    with pytest.raises(RecordingError, match='record_min_free_space'):
+        ros.sim(record_path=str(tmp_path / 'full.mcap'), record_min_free_space=2 ** 62)
+    assert not (tmp_path / 'full.mcap').exists()
+    # the disk fills during the run: the recording stops, the simulation goes on
+    free = [10 ** 12]
+    monkeypatch.setattr(run_recorder, '_free_bytes', lambda _: free[0])
+    monkeypatch.setattr(run_recorder, '_SPACE_CHECK_S', 0.0)
+    sim = ros.sim(record_path=str(tmp_path / 'run.mcap'), real_time_factor=0.0,
+                  record_min_free_space=10 ** 9)
+    assert ros.spin_until(lambda: sim.engine.tick_index >= 10, 60.0)
+    free[0] = 10 ** 8
+    assert ros.spin_until(lambda: sim.recording.error is not None, 60.0)
+    assert 'record_min_free_space' in sim.recording.error
+    ticks = sim.engine.tick_index
+    assert ros.spin_until(lambda: sim.engine.tick_index > ticks + 20, 60.0)  # goes on
+    assert open_recording(tmp_path / 'run.mcap').message_count > 0
 
 
 def test_unwritable_record_path_is_refused_at_start(ros: Ros, tmp_path: Path) -> None:
