@@ -83,9 +83,12 @@ def _positive(where: str, value: Any) -> float:
 
 def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenario:
     """Validate a parsed scenario and return it; raise ScenarioError naming the problem."""
+    if content is None:
+        raise ScenarioError('the scenario is empty: it needs the keys duration, rotation, '
+                            'particles')
     if not isinstance(content, Mapping):
         raise ScenarioError('a scenario must be a mapping with keys duration, rotation, '
-                            'particles')
+                            f'particles, got {type(content).__name__} {content!r:.40}')
     unknown = sorted(str(k) for k in set(content) - set(SCENARIO_KEYS))
     if unknown:
         raise ScenarioError(f'unknown scenario key(s) {", ".join(map(repr, unknown))}; '

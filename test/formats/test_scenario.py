@@ -133,6 +133,23 @@ def test_missing_keys_and_files(tmp_path: Path) -> None:
         load_scenario(bad)
 
 
+@pytest.mark.parametrize('text, message', [
+    ('', 'the scenario is empty: it needs the keys duration, rotation, particles'),
+    ('# only a comment\n', 'the scenario is empty'),
+    ('- 1\n- 2\n', 'a scenario must be a mapping with keys duration, rotation, particles, '
+                   'got list [1, 2]'),
+    ('just text\n', "got str 'just text'"),
+])
+def test_an_empty_file_or_one_that_is_not_a_mapping(tmp_path: Path, text: str,
+                                                     message: str) -> None:
+    path = tmp_path / 'scenario.yaml'
+    path.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert str(info.value).startswith(f'{path}: ') and message in str(info.value)
+    assert '\n' not in str(info.value)
+
+
 def test_parameter_file_relative_to_the_scenario(tmp_path: Path) -> None:
     (tmp_path / 'p.yaml').write_text('d: 30.0\nmu_C: 0.5\n')
     (tmp_path / 's.yaml').write_text(

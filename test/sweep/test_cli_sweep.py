@@ -15,7 +15,9 @@
 
 """The command `cone-feeder-sim sweep`: arguments, a missing Dask, a bad sweep, no scheduler."""
 
+import json
 from pathlib import Path
+import re
 import sys
 
 from cone_feeder_sim.cli import main
@@ -76,3 +78,32 @@ def test_an_unreachable_scheduler_is_named(
                  '--scheduler', 'tcp://127.0.0.1:1']) == 2
     assert 'cannot reach the Dask scheduler at tcp://127.0.0.1:1' in capsys.readouterr().err
     assert (tmp_path / 'out' / 'sweep.json').exists()  # nothing ran; a re-run resumes
+
+
+def test_retry_failed_runs_only_the_failed_jobs_again(sweep_file: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture) -> None:
+    pytest.importorskip('distributed')
+    out = tmp_path / 'out'
+    command = ['sweep', str(sweep_file), '--out', str(out), '--workers', '1']
+    assert main(command) == 0
+    first = {job: (out / 'jobs' / job / 'events.csv').read_bytes() for job in ('00000', '00001')}
+    # what a run whose worker died leaves of a job: its result, failed, and no files
+    result = out / 'jobs' / '00001' / 'result.json'
+    held = json.loads(result.read_text())
+    held.update(status='failed', error='KilledWorker: the workers running it died',
+                metrics={})
+    result.write_text(json.dumps(held))
+    (out / 'jobs' / '00001' / 'events.csv').unlink()
+    kept = (out / 'jobs' / '00000' / 'result.json').stat().st_mtime_ns
+    capsys.readouterr()
+    assert main(command) == 1  # without --retry-failed: nothing runs, the failure stays
+    err = capsys.readouterr().err
+    assert '2 finished before, 0 to run' in err and 'failed' in err
+    assert json.loads(result.read_text())['status'] == 'failed'
+    assert main(command + ['--retry-failed']) == 0
+    err = capsys.readouterr().err
+    assert '1 finished before, 1 to run' in err and re.search(r'\] job 00001 done', err)
+    assert json.loads(result.read_text())['status'] == 'done'
+    assert (out / 'jobs' / '00001' / 'events.csv').read_bytes() == first['00001']
+    assert (out / 'jobs' / '00000' / 'result.json').stat().st_mtime_ns == kept
+    assert ',failed,' not in (out / 'summary.csv').read_text()

@@ -43,6 +43,34 @@ def test_a_piece_rides_its_trough_passes_the_gate_settles_and_is_packed() -> Non
     assert packs[0].giveaway == pytest.approx(0.02)
 
 
+def test_starved_heads_are_counted_at_every_cycle() -> None:
+    # the heads without a weighed product, counted here just before each cycle
+    p = WeigherParams(target=0.1, min_heads=1, max_heads=2, transport_time=0.5,
+                      gate_time=0.15, settle_time=0.15, load_cell_noise=0.0,
+                      cycles_per_minute=60.0)
+    w = Weigher(p, heads=4)
+    arrivals = [(0.13, 1, 0.06), (0.41, 3, 0.05), (1.27, 2, 0.07), (2.61, 1, 0.04),
+                (2.65, 4, 0.05), (4.33, 3, 0.11)]
+    counted, t, packs = [], 0.0, []
+    for cycle in range(1, 7):  # cycles at 1, 2, ... 6 s; no arrival or settling on them
+        for when, channel, mass in arrivals:
+            if t < when <= cycle:
+                packs += w.advance(when)
+                w.receive([channel], [mass], [when])
+        packs += w.advance(cycle - 1e-6)
+        counted.append(4 - int(w.available().sum()))
+        packs += w.advance(float(cycle))
+        t = float(cycle)
+    stats = w.stats()
+    assert stats.cycles == 6 and packs
+    assert stats.starved_per_cycle == pytest.approx(sum(counted) / 6, abs=1e-15)
+    assert 0 < sum(counted) < 24
+    # no product at all: every head starves at every cycle
+    empty = Weigher(p, heads=4)
+    empty.advance(5.0)
+    assert empty.stats().starved_per_cycle == 4.0
+
+
 def test_amplitude_scales_the_trough_and_zero_stops_it() -> None:
     p = WeigherParams(max_heads=2, transport_time=2.0, load_cell_noise=0.0)
     w = Weigher(p, heads=2)
