@@ -169,8 +169,7 @@ class McapRecorder:
 
     @property
     def size_bytes(self) -> int:
-        """Return the bytes in the file so far plus those of the open chunk (uncompressed, with
-        its message index)."""
+        """Return the bytes in the file so far plus the open chunk's (uncompressed, indexed)."""
         with self._lock:
             return self._stream.tell() + self._pending_bytes
 

@@ -141,7 +141,7 @@ def test_missing_keys_and_files(tmp_path: Path) -> None:
     ('just text\n', "got str 'just text'"),
 ])
 def test_an_empty_file_or_one_that_is_not_a_mapping(tmp_path: Path, text: str,
-                                                     message: str) -> None:
+                                                    message: str) -> None:
     path = tmp_path / 'scenario.yaml'
     path.write_text(text)
     with pytest.raises(ScenarioError) as info:

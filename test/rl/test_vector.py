@@ -157,4 +157,3 @@ def test_the_shipped_policy_beats_the_rule_on_a_seed() -> None:
     rule = train_ppo.evaluate(train_ppo.rule_policy, [0], episode)
     assert learned['reward'] > rule['reward'] + 100.0, (learned, rule)
     assert learned['distribution error'] < rule['distribution error']
-

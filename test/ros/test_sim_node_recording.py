@@ -341,7 +341,7 @@ def test_compression_and_file_size_are_the_node_s_parameters(
 
 
 def test_min_free_space_is_the_node_s_parameter(ros: Ros, tmp_path: Path,
-                                               monkeypatch: pytest.MonkeyPatch) -> None:
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
     # more free space asked for than any disk has: the start is refused, no file left
     with pytest.raises(RecordingError, match='record_min_free_space'):
         ros.sim(record_path=str(tmp_path / 'full.mcap'), record_min_free_space=2 ** 62)
