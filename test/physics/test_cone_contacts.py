@@ -127,4 +127,3 @@ def test_the_paper_s_samples_with_contact_leave_as_in_the_dem_reference() -> Non
         sys.path.pop(0)
     content = paper.with_neighbours(None)
     paper.assert_held_to(paper.sample_exits(content), paper.dem_exits(content, 1.5))
-
