@@ -284,6 +284,21 @@ def _stage_history(y0, y, i, j, hist, w, tau, out):  # type: ignore[no-untyped-d
 
 
 @numba.njit(cache=True)
+def _pair_state(y, i, j, w, contact, d, u):  # type: ignore[no-untyped-def]
+    """
+    Write x_i - x_j into d and v_i - v_j in the frame turning with the cone into u (3,).
+
+    y (9n, 1) world states, w (rad/s) the cone's speed; return whether the pair touches.
+    """
+    for k in range(3):
+        d[k] = y[9 * i + k, 0] - y[9 * j + k, 0]
+        u[k] = y[9 * i + 3 + k, 0] - y[9 * j + 3 + k, 0]
+    u[0] += w * d[1]
+    u[1] -= w * d[0]
+    return math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) < contact[i, 1] + contact[j, 1]
+
+
+@numba.njit(cache=True)
 def _field(t, tau, y0, y, active, hist, rows, contact, law, cone, literal, tangential,
            table_t, table_w, out):  # type: ignore[no-untyped-def]
     """dy/dt (9n, 1) at t + tau of the pieces on the cone with their pair forces."""
@@ -302,14 +317,8 @@ def _field(t, tau, y0, y, active, hist, rows, contact, law, cone, literal, tange
         for j in range(i + 1, n):
             if not (active[i] and active[j]):
                 continue
-            for k in range(3):
-                d[k] = y[9 * i + k, 0] - y[9 * j + k, 0]
-                u[k] = y[9 * i + 3 + k, 0] - y[9 * j + 3 + k, 0]
-            if math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) >= (
-                    contact[i, 1] + contact[j, 1]):
+            if not _pair_state(y, i, j, w, contact, d, u):
                 continue
-            u[0] += w * d[1]  # relative velocity in the frame turning with the cone
-            u[1] -= w * d[0]
             _stage_history(y0, y, i, j, hist[i, j], w_mid, tau, xi)
             pair_force_compiled(contact[i], contact[j], law, d, u, xi, force)
             for k in range(3):
@@ -357,16 +366,10 @@ def _cone_dem(rows, contact, law, cone, literal, tangential, y0, table_t, table_
             for j in range(i + 1, n):
                 if not (active[i] and active[j]):
                     continue
-                for k in range(3):
-                    d[k] = stage[9 * i + k, 0] - stage[9 * j + k, 0]
-                    u[k] = stage[9 * i + 3 + k, 0] - stage[9 * j + 3 + k, 0]
-                if math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) >= (
-                        contact[i, 1] + contact[j, 1]):
+                if not _pair_state(stage, i, j, w, contact, d, u):
                     hist[i, j, :] = 0.0
                     continue
                 _stage_history(y, stage, i, j, hist[i, j], w_mid, dt, xi)
-                u[0] += w * d[1]
-                u[1] -= w * d[0]
                 f_n, s_t = pair_force_compiled(contact[i], contact[j], law, d, u, zero, force)
                 cap = law[1] * abs(f_n)
                 size = math.sqrt(xi[0] * xi[0] + xi[1] * xi[1] + xi[2] * xi[2])

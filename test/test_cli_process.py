@@ -59,52 +59,81 @@ def default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+class Run:
+    """``cone-feeder-sim run`` of a scenario in a process of its own, its files in tmp_path."""
+
+    def __init__(self, tmp_path: Path, scenario_text: str) -> None:
+        """Start the run (events CSV and MCAP recording), SIGINT not ignored."""
+        scenario = tmp_path / 'scenario.yaml'
+        scenario.write_text(scenario_text)
+        self.events = tmp_path / 'events.csv'
+        self.mcap = tmp_path / 'run.mcap'
+        self.log_path = tmp_path / 'run.log'
+        with self.log_path.open('wb') as log:
+            self.proc = subprocess.Popen(
+                [sys.executable, '-m', 'cone_feeder_sim.cli', 'run', str(scenario),
+                 '--events', str(self.events), '--mcap', str(self.mcap)],
+                stdout=log, stderr=subprocess.STDOUT, preexec_fn=default_sigint)
+
+    def rows(self, count: int) -> list[list[str]]:
+        """Wait until the CSV holds count rows, the header included; return them."""
+        deadline = time.monotonic() + FIRST_ROW_TIMEOUT
+        while len(seen := read_rows(self.events)) < count:
+            assert self.proc.poll() is None, self.log()
+            assert time.monotonic() < deadline, 'no rows in time:\n' + self.log()
+            time.sleep(0.05)
+        return seen
+
+    def stop(self, signum: signal.Signals, timeout: float) -> tuple[int, float]:
+        """Send the signal; return the exit status and the seconds it took to come."""
+        sent = time.monotonic()
+        self.proc.send_signal(signum)
+        return self.proc.wait(timeout), time.monotonic() - sent
+
+    def log(self) -> str:
+        """Return what the run printed."""
+        return self.log_path.read_text()
+
+    def recording(self) -> tuple[list[str], dict[str, dict[str, str]]]:
+        """Return the topics of the MCAP file's messages and its metadata; check it whole."""
+        with self.mcap.open('rb') as stream:
+            reader = mcap.reader.make_reader(stream)
+            summary = reader.get_summary()
+            assert summary is not None and summary.statistics is not None
+            metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+            topics = [channel.topic for _, channel, _ in reader.iter_messages()]
+        assert len(topics) == summary.statistics.message_count
+        return topics, metadata
+
+    def close(self) -> None:
+        """Kill the process if it still runs."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
 @pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGINT])
 def test_signal_after_the_first_exits_keeps_them(tmp_path: Path, signum: signal.Signals) -> None:
-    scenario = tmp_path / 'scenario.yaml'
-    scenario.write_text(SCENARIO)
-    events = tmp_path / 'events.csv'
-    run_mcap = tmp_path / 'run.mcap'
-    log_path = tmp_path / 'run.log'
-    with log_path.open('wb') as log:
-        proc = subprocess.Popen(
-            [sys.executable, '-m', 'cone_feeder_sim.cli', 'run', str(scenario),
-             '--events', str(events), '--mcap', str(run_mcap)],
-            stdout=log, stderr=subprocess.STDOUT, preexec_fn=default_sigint)
+    run = Run(tmp_path, SCENARIO)
     try:
-        deadline = time.monotonic() + FIRST_ROW_TIMEOUT
-        seen = read_rows(events)
-        while len(seen) < 2:
-            assert proc.poll() is None, log_path.read_text()
-            assert time.monotonic() < deadline, 'no exit row in time:\n' + log_path.read_text()
-            time.sleep(0.05)
-            seen = read_rows(events)
-        proc.send_signal(signum)
-        code = proc.wait(END_TIMEOUT)
+        seen = run.rows(3)  # the header and the two thrown pieces
+        code, _ = run.stop(signum, END_TIMEOUT)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    log = log_path.read_text()
+        run.close()
+    log = run.log()
     assert code == 128 + signum, log
     assert f'interrupted by {signum.name} at t = ' in log
     t_end = float(log.split('at t = ')[1].split()[0])
     assert t_end < 1.0e4
     # the CSV: the header and the rows seen before the signal, in exit-time order
-    rows = read_rows(events)
-    assert events.read_bytes().endswith(b'\r\n')  # no half-written row
+    rows = read_rows(run.events)
+    assert run.events.read_bytes().endswith(b'\r\n')  # no half-written row
     assert tuple(rows[0]) == EVENT_COLUMNS and rows[:len(seen)] == seen
     assert sorted(int(r[0]) for r in rows[1:]) == [0, 1]
-    assert f': 2 exits written to {events}, run recorded to {run_mcap}' in log
+    assert f': 2 exits written to {run.events}, run recorded to {run.mcap}' in log
     assert all(float(r[1]) <= t_end for r in rows[1:])
     # the MCAP: complete (summary, end metadata) and readable to the end
-    with run_mcap.open('rb') as stream:
-        reader = mcap.reader.make_reader(stream)
-        summary = reader.get_summary()
-        assert summary is not None and summary.statistics is not None
-        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        topics = [channel.topic for _, channel, _ in reader.iter_messages()]
-    assert len(topics) == summary.statistics.message_count
+    topics, metadata = run.recording()
     assert topics.count('/exit_events') >= 1
     assert float(metadata[END_METADATA_NAME]['end_time']) == pytest.approx(t_end, abs=1e-3)
     assert int(metadata[END_METADATA_NAME]['exits']) == 2
@@ -141,40 +170,17 @@ def test_a_signal_stops_a_long_interval_within_a_step(
         tmp_path: Path, case: str, signum: signal.Signals) -> None:
     # the kernels read the stop flag between steps: the run ends without finishing the
     # interval, with its files complete (the events CSV: its header; the MCAP: readable)
-    scenario = tmp_path / 'scenario.yaml'
-    scenario.write_text(LONG_RUNS[case])
-    events = tmp_path / 'events.csv'
-    run_mcap = tmp_path / 'run.mcap'
-    log_path = tmp_path / 'run.log'
-    with log_path.open('wb') as log:
-        proc = subprocess.Popen(
-            [sys.executable, '-m', 'cone_feeder_sim.cli', 'run', str(scenario),
-             '--events', str(events), '--mcap', str(run_mcap)],
-            stdout=log, stderr=subprocess.STDOUT, preexec_fn=default_sigint)
+    run = Run(tmp_path, LONG_RUNS[case])
     try:
-        deadline = time.monotonic() + FIRST_ROW_TIMEOUT
-        while not read_rows(events):  # the header: the files are open, the run starts
-            assert proc.poll() is None, log_path.read_text()
-            assert time.monotonic() < deadline, 'no header in time:\n' + log_path.read_text()
-            time.sleep(0.05)
+        run.rows(1)  # the header: the files are open, the run starts
         time.sleep(0.5)  # into the interval (a signal before it stops the run as well)
-        proc.send_signal(signum)
-        sent = time.monotonic()
-        code = proc.wait(STOP_TIMEOUT)
-        took = time.monotonic() - sent
+        code, took = run.stop(signum, STOP_TIMEOUT)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    log = log_path.read_text()
+        run.close()
+    log = run.log()
     assert code == 128 + signum, log
     assert f'interrupted by {signum.name} at t = 0.000 s: 0 exits written' in log, log
     assert took < STOP_TIMEOUT
-    assert read_rows(events) == [list(EVENT_COLUMNS)]
-    with run_mcap.open('rb') as stream:
-        reader = mcap.reader.make_reader(stream)
-        summary = reader.get_summary()
-        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        messages = sum(1 for _ in reader.iter_messages())
-    assert summary is not None and summary.statistics.message_count == messages
+    assert read_rows(run.events) == [list(EVENT_COLUMNS)]
+    _, metadata = run.recording()
     assert float(metadata[END_METADATA_NAME]['end_time']) == 0.0
