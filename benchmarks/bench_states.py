@@ -145,7 +145,8 @@ def main() -> None:
     parser.add_argument('--states', nargs='+', choices=STATES, default=list(STATES))
     parser.add_argument('--interactions', action='store_true',
                         help='measure each row without and with contact between pieces')
-    parser.add_argument('--coupling', choices=('exact', 'multirate'), default='multirate',
+    parser.add_argument('--coupling', choices=('island', 'exact', 'multirate'),
+                        default='multirate',
                         help='with --interactions: how touching pieces are integrated')
     parser.add_argument('--coupling-tolerance', type=float,
                         default=InteractionParams().coupling_tolerance,

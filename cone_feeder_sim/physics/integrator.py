@@ -76,19 +76,23 @@ def error_norm(err, y0, y1, rtol, atol):
 
 
 @jit
-def step_factor(err):
-    """Return the factor for the next step size given the scaled error norm of this step."""
+def step_factor(err, order):
+    """
+    Return the factor for the next step size given the scaled error norm of this step.
+
+    order: that of the embedded error estimate (the error is O(h^(order + 1))).
+    """
     if err == 0.0:
         return FAC_MAX
-    fac = SAFETY * err ** (-1.0 / (ERROR_ORDER + 1))
+    fac = SAFETY * err ** (-1.0 / (order + 1))
     return min(FAC_MAX, max(FAC_MIN, fac))
 
 
 @jit
-def proposal_after_rejection(h, err, repeated):
+def proposal_after_rejection(h, err, repeated, order=ERROR_ORDER):
     """Return the next trial step (s) after a step of h (s) was rejected with error err."""
     if math.isfinite(err):
-        h_prop = h * max(FAC_MIN, SAFETY * err ** (-1.0 / (ERROR_ORDER + 1)))
+        h_prop = h * max(FAC_MIN, SAFETY * err ** (-1.0 / (order + 1)))
     else:
         h_prop = h * FAC_MIN
     if repeated:  # repeated rejection: the error model does not hold, cut hard
@@ -97,17 +101,17 @@ def proposal_after_rejection(h, err, repeated):
 
 
 @jit
-def growth_after_acceptance(h, err, h_acc, err_acc, after_rejection):
+def growth_after_acceptance(h, err, h_acc, err_acc, after_rejection, order):
     """
     Return the factor for the next step after an accepted step h (s) with error err.
 
     Predictive (Gustafsson) control: h_acc and err_acc are the previous accepted step and
     its error (h_acc 0: none yet); no growth right after a rejection.
     """
-    grow = step_factor(err)
+    grow = step_factor(err, order)
     if h_acc > 0.0 and err > 0.0:
         # also use the error trend of the last two accepted steps
-        pred = SAFETY * (h / h_acc) * (err_acc / (err * err)) ** (1.0 / (ERROR_ORDER + 1))
+        pred = SAFETY * (h / h_acc) * (err_acc / (err * err)) ** (1.0 / (order + 1))
         grow = min(grow, max(FAC_MIN, min(FAC_MAX, pred)))
     if after_rejection:
         grow = min(grow, 1.0)
@@ -116,7 +120,7 @@ def growth_after_acceptance(h, err, h_acc, err_acc, after_rejection):
 
 @jit
 def after_acceptance(t, t_end, h, h_prop, h_max, err, h_acc, err_acc, after_rejection,
-                     truncated):
+                     truncated, order=ERROR_ORDER):
     """
     Return (t, h_prop, h_acc, err_acc) after an accepted step h (s) from t with error err.
 
@@ -124,7 +128,7 @@ def after_acceptance(t, t_end, h, h_prop, h_max, err, h_acc, err_acc, after_reje
     proposal it replaced and the grown step; the previous accepted step and error become
     this one's (the error floored at 1e-4).
     """
-    grow = growth_after_acceptance(h, err, h_acc, err_acc, after_rejection)
+    grow = growth_after_acceptance(h, err, h_acc, err_acc, after_rejection, order)
     if truncated:
         return t_end, min(h_max, max(h_prop, h * grow)), h, max(err, 1e-4)
     return t + h, min(h_max, h * grow), h, max(err, 1e-4)

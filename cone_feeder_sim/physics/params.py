@@ -153,7 +153,7 @@ INTERACTION_LIMITS: dict[str, Limit] = {
 }
 
 #: How pieces that touch are integrated (InteractionParams.coupling).
-COUPLING_CHOICES = ('multirate', 'exact')
+COUPLING_CHOICES = ('island', 'multirate', 'exact')
 
 NORMAL_FORCE_CHOICES = ('newton', 'literal')
 FRICTION_DIRECTION_CHOICES = ('full', 'tangential')

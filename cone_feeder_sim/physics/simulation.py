@@ -39,6 +39,7 @@ from .integrator import (
     ACTIVE, advance_batch, advance_batch_owned, EXITED, FAILED, REASON_NOT_FINITE,
     REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED,
     STAT_WIDTH, STOPPED)
+from .island import advance_islands, ROS34PW2
 from .model import STATE_SIZE
 from .neighbours import contact_pairs
 from .params import (
@@ -560,7 +561,10 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
                    t_event, stats, work.stop)
     if not pairs.shape[0]:
         return
-    if params.model.interactions.coupling == 'multirate':
+    coupling = params.model.interactions.coupling
+    if coupling == 'island':
+        _advance_islands(state, params, segments, islands, hist, work)
+    elif coupling == 'multirate':
         work.coupling_step = _advance_multirate(state, params, segments, pairs, hist, coupled,
                                                 work)
     else:
@@ -570,6 +574,27 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
                                   work)
             hist[rows] = island_hist
     _keep_contacts(state, pairs, hist, status, work)
+
+
+def _advance_islands(state: SimState, params: SimParams,
+                     segments: tuple[np.ndarray, np.ndarray, np.ndarray],
+                     islands: list, hist: np.ndarray, work: '_Work') -> None:
+    """Advance the islands by :func:`island.advance_islands` (ROS34PW2), arrays in place."""
+    solver = params.solver
+    members = np.concatenate([m for m, _, _ in islands]).astype(np.int64)
+    member_start = np.cumsum([0] + [len(m) for m, _, _ in islands]).astype(np.int64)
+    lpairs = np.ascontiguousarray(np.concatenate([p for _, p, _ in islands]), dtype=np.int64)
+    rows = np.concatenate([r for _, _, r in islands])
+    pair_start = np.cumsum([0] + [len(r) for _, _, r in islands]).astype(np.int64)
+    island_hist = np.ascontiguousarray(hist[rows])
+    method = ROS34PW2
+    advance_islands(work.y, island_hist, members, member_start, lpairs, pair_start,
+                    state.products, params.interaction_row, params.global_row, *segments,
+                    params.model.r, work.step_size, work.status, work.t_event, solver.rtol,
+                    params.atol, solver.h_min, solver.h_max, solver.h_init, solver.max_steps,
+                    work.stats, work.stop, method.a, method.c, method.times, method.d,
+                    method.m, method.e, method.gamma, method.order)
+    hist[rows] = island_hist
 
 
 def _advance_multirate(state: SimState, params: SimParams,

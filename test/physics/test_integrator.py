@@ -39,10 +39,12 @@ def test_error_norm_by_hand() -> None:
 
 
 def test_step_factor_is_bounded_and_decreasing() -> None:
-    assert integrator.step_factor(0.0) == integrator.FAC_MAX
-    assert integrator.step_factor(1e6) == integrator.FAC_MIN
-    assert integrator.step_factor(1.0) == pytest.approx(integrator.SAFETY)
-    assert integrator.step_factor(0.1) > integrator.step_factor(0.5)
+    order = integrator.ERROR_ORDER
+    assert integrator.step_factor(0.0, order) == integrator.FAC_MAX
+    assert integrator.step_factor(1e6, order) == integrator.FAC_MIN
+    assert integrator.step_factor(1.0, order) == pytest.approx(integrator.SAFETY)
+    assert integrator.step_factor(0.1, order) > integrator.step_factor(0.5, order)
+    assert integrator.step_factor(0.5, 2.0) > integrator.step_factor(0.5, order)
 
 
 def test_exit_location_on_a_straight_path_is_exact() -> None:
