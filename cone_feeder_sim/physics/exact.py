@@ -55,7 +55,7 @@ from .rosenbrock import (
     lu_solve)
 from .stop import stop_requested
 
-__all__ = ['advance_island', 'islands_of']
+__all__ = ['advance_island', 'history_rate', 'history_rate_of', 'islands_of']
 
 jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
@@ -77,8 +77,14 @@ def cap_level(d0, d1, d2, u0, u1, u2, pi, pj, inter):
 @jit
 def history_rate(d0, d1, d2, u0, u1, u2, a0, a1, a2, h0, h1, h2, pi, pj, inter):
     """Return xi' (3 floats) of a contact: d, u, a the pair's relative state and acceleration."""
-    dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     f = contact_force(d0, d1, d2, u0, u1, u2, h0, h1, h2, pi, pj, inter)
+    return history_rate_of(f, d0, d1, d2, u0, u1, u2, a0, a1, a2, h0, h1, h2, pi, pj, inter)
+
+
+@jit
+def history_rate_of(f, d0, d1, d2, u0, u1, u2, a0, a1, a2, h0, h1, h2, pi, pj, inter):
+    """:func:`history_rate` given the contact's :func:`.contact.contact_force` f."""
+    dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     if f[3] <= 0.0:
         return 0.0, 0.0, 0.0
     n0, n1, n2 = f[6], f[7], f[8]

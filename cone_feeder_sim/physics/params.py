@@ -313,19 +313,20 @@ class InteractionParams:
     between two pieces; pull_off (N), the largest pull between two default pieces (sizes
     the cohesion). The defaults e = 0.3, friction 0.5 and pull-off 0.05 N are assumptions:
     no measurement of raw meat on raw meat is known to us (config/table2.yaml says so).
-    coupling: 'multirate' (default: each piece keeps its own steps, the pair forces couple
-    the pieces over intervals chosen by the contact time and error control,
-    :mod:`coupling`) or 'exact' (the pieces that touch and their contact histories
-    integrated as one system, :mod:`exact`: the reference, whatever the cost).
-    coupling_tolerance (m): the largest position error one coupling interval may give a
-    piece.
+    coupling: 'island' (default: one linearly implicit step per contact island, its fast
+    pieces and colliding pairs refined alone, :mod:`island`), 'exact' (the pieces that
+    touch and their contact histories integrated as one system, :mod:`exact`: the
+    reference, whatever the cost) or 'multirate' (each piece keeps its own steps, the pair
+    forces couple the pieces over intervals chosen by the contact time and error control,
+    :mod:`coupling`). coupling_tolerance (m): multirate only, the largest position error
+    one coupling interval may give a piece.
     """
 
     enabled: bool = False
     restitution: float = 0.3
     friction: float = 0.5
     pull_off: float = 0.05
-    coupling: str = 'multirate'
+    coupling: str = 'island'
     coupling_tolerance: float = 1.0e-8
 
     def __post_init__(self) -> None:

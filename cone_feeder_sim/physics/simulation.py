@@ -39,7 +39,7 @@ from .integrator import (
     ACTIVE, advance_batch, advance_batch_owned, EXITED, FAILED, REASON_NOT_FINITE,
     REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED,
     STAT_WIDTH, STOPPED)
-from .island import advance_islands, ROS34PW2
+from .island import advance_islands, EXACT_PIECES, ISLAND_COUNTERS, ROS34PW2
 from .model import STATE_SIZE
 from .neighbours import contact_pairs
 from .params import (
@@ -576,6 +576,9 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
     _keep_contacts(state, pairs, hist, status, work)
 
 
+ISLAND_TOTALS = np.zeros(ISLAND_COUNTERS, dtype=np.int64)
+
+
 def _advance_islands(state: SimState, params: SimParams,
                      segments: tuple[np.ndarray, np.ndarray, np.ndarray],
                      islands: list, hist: np.ndarray, work: '_Work') -> None:
@@ -587,14 +590,16 @@ def _advance_islands(state: SimState, params: SimParams,
     rows = np.concatenate([r for _, _, r in islands])
     pair_start = np.cumsum([0] + [len(r) for _, _, r in islands]).astype(np.int64)
     island_hist = np.ascontiguousarray(hist[rows])
+    counters = np.zeros((len(islands), ISLAND_COUNTERS), dtype=np.int64)
     method = ROS34PW2
     advance_islands(work.y, island_hist, members, member_start, lpairs, pair_start,
                     state.products, params.interaction_row, params.global_row, *segments,
                     params.model.r, work.step_size, work.status, work.t_event, solver.rtol,
                     params.atol, solver.h_min, solver.h_max, solver.h_init, solver.max_steps,
                     work.stats, work.stop, method.a, method.c, method.times, method.d,
-                    method.m, method.e, method.gamma, method.order)
+                    method.m, method.e, method.gamma, method.order, counters)
     hist[rows] = island_hist
+    ISLAND_TOTALS[:] += counters.sum(axis=0)
 
 
 def _advance_multirate(state: SimState, params: SimParams,
@@ -812,15 +817,19 @@ def warm_up(model: ModelParams | None = None, batched: bool = False) -> None:
     if model is not None:
         couplings = (model.interactions.coupling,) if model.interactions.enabled else ()
     couplings = tuple(c for c in couplings if c not in _LOADED)
-    # the contact kernels (neighbour search, multirate and exact coupling) with two touching
-    # pieces
-    other = (x + 0.045, 0.0, resting_height(base, base.product, x + 0.045, 0.0))
+    # the contact kernels (neighbour search, each coupling) with touching pieces: a row of
+    # island.EXACT_PIECES + 1 for the island coupling (its common steps; a row of two, its
+    # small islands), two for the others
     for coupling in couplings:
         touching = replace(base, interactions=replace(base.interactions, enabled=True,
                                                       coupling=coupling))
         params = SimParams(model=touching, solver=params.solver)
-        state, _ = add_particles(SimState(), params, [start, other], None, None, omega=0.0)
-        advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
+        rows = (2, EXACT_PIECES + 1) if coupling == 'island' else (2,)
+        for count in rows:
+            row = [(0.05 + 0.045 * k, 0.0, resting_height(base, base.product, 0.05 + 0.045 * k,
+                                                         0.0)) for k in range(count)]
+            state, _ = add_particles(SimState(), params, row, None, None, omega=0.0)
+            advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
         _LOADED.add(coupling)
 
 

@@ -267,11 +267,12 @@ _INTERACTION_DESCRIPTIONS = {
     'friction': 'pair law: Coulomb friction coefficient between two pieces',
     'pull_off': 'pair law: force (N) that parts two just-touching default pieces (sizes the '
                 'cohesion)',
-    'coupling': "how pieces that touch are integrated: 'multirate' (each piece on its own "
-                'steps, pair forces coupled over error-controlled intervals, every pair '
-                "kept) or 'exact' (the pieces and their contact histories as one system: "
-                'the reference, whatever the cost)',
-    'coupling_tolerance': 'multirate coupling: largest position error (m) one coupling '
+    'coupling': "how pieces that touch are integrated: 'island' (one linearly implicit "
+                'step per contact island, its fast pieces and colliding pairs refined '
+                "alone), 'exact' (the pieces and their contact histories as one system: "
+                "the reference, whatever the cost) or 'multirate' (each piece on its own "
+                'steps, pair forces extrapolated over error-controlled intervals)',
+    'coupling_tolerance': 'multirate coupling only: largest position error (m) one coupling '
                           'interval may give a piece',
 }
 

@@ -536,16 +536,19 @@ def test_no_kernel_is_compiled_inside_a_tick() -> None:
 def test_no_contact_kernel_is_compiled_inside_a_tick() -> None:
     from cone_feeder_sim.physics.coupling import advance_coupled
     from cone_feeder_sim.physics.exact import advance_island
+    from cone_feeder_sim.physics.island import advance_islands
     from cone_feeder_sim.physics.neighbours import _contact_pairs
     # each engine loads the kernels of its own coupling when it is built
-    for coupling, kernels in (('multirate', (advance_coupled, _contact_pairs)),
+    for coupling, kernels in (('island', (advance_islands, _contact_pairs)),
+                              ('multirate', (advance_coupled, _contact_pairs)),
                               ('exact', (advance_island, _contact_pairs))):
         eng = engine(model=ModelParams(interactions=InteractionParams(enabled=True,
                                                                       coupling=coupling)),
                      feed=FeedParams(rate=0.0))
         loaded = [list(k.signatures) for k in kernels]
         assert all(loaded)  # the engine loaded them when built
-        eng.spawn([resting(0.1, 0.0), resting(0.14, 0.0)])
+        # a row of five touching pieces: an island of common steps (and two of two)
+        eng.spawn([resting(0.02 + 0.046 * k, 0.0) for k in range(5)])
         for _ in range(30):
             eng.tick()
         assert [list(k.signatures) for k in kernels] == loaded
@@ -596,7 +599,7 @@ def test_channel_feed_sets_the_troughs_and_is_checked() -> None:
         FeederEngine(EngineConfig()).submit(ChannelFeed((1.0,) * 14))
 
 
-@pytest.mark.parametrize('coupling', ['alone', 'multirate', 'exact'])
+@pytest.mark.parametrize('coupling', ['alone', 'island', 'multirate', 'exact'])
 def test_a_long_tick_leaves_the_gil_to_other_threads(coupling: str) -> None:
     # a tick that would compute for minutes (no step longer than 2e-8 s: a million steps a
     # piece) runs on a thread; this thread keeps running Python meanwhile and then stops
@@ -604,9 +607,8 @@ def test_a_long_tick_leaves_the_gil_to_other_threads(coupling: str) -> None:
     # ended by itself, and the tick would not have been stopped.
     import threading
     import time
-    model = ModelParams(interactions=InteractionParams(enabled=coupling != 'alone',
-                                                       coupling='exact' if coupling == 'exact'
-                                                       else 'multirate'))
+    model = ModelParams(interactions=InteractionParams(
+        enabled=coupling != 'alone', coupling='island' if coupling == 'alone' else coupling))
     sim = FeederEngine(EngineConfig(model=model, solver=SolverParams(h_max=2.0e-8),
                                     drive=DriveParams(cmd_timeout=0.0),
                                     feed=FeedParams(rate=0.0)))

@@ -17,7 +17,7 @@ Collisions of two pieces in free flight (high above a still cone), against Hertz
 
 The pieces fly side by side 20 m above the cone, where gravity moves both alike and the
 cone does not reach them, so their relative motion is the pair law's alone. Each case runs
-through the Simulator on its default coupling (multirate) unless named otherwise.
+through the Simulator on its default coupling (island) unless named otherwise.
 """
 
 import math
@@ -44,7 +44,7 @@ def hertz_theory(a: Piece, b: Piece, v: float) -> dict[str, float]:
 
 
 def collision(v: float, restitution: float = 0.3, friction: float = 0.5, pull_off: float = 0.0,
-              tangential: float = 0.0, coupling: str = 'multirate',
+              tangential: float = 0.0, coupling: str = 'island',
               products: tuple[ProductParams, ProductParams] | None = None,
               samples: np.ndarray | None = None, t_end: float | None = None,
               solver: SolverParams | None = None) -> tuple[Simulator, list]:
@@ -104,8 +104,12 @@ def test_an_elastic_collision_is_hertz(v: float) -> None:
 @pytest.mark.parametrize('v', [0.05, 0.5, 3.0])
 @pytest.mark.parametrize('e', [0.1, 0.25, 0.5, 0.9])
 def test_the_separation_speed_is_the_restitution(e: float, v: float) -> None:
+    # at the default tolerances the slowest rebound (e 0.1 at 0.05 m/s: 5 mm/s apart) comes
+    # out 1.7 % low; the solver's tolerances ten times tighter hold it within 1 %
     t_c = hertz_theory(Piece(), Piece(), v)['t_c']
-    _, states = collision(v, restitution=e, t_end=3.0 * t_c)
+    solver = SolverParams(rtol=1e-6, atol_position=1e-7, atol_velocity=1e-6,
+                          atol_force=1e-5) if e * v < 0.01 else None
+    _, states = collision(v, restitution=e, t_end=3.0 * t_c, solver=solver)
     qdot = states[-1][2]
     assert (qdot[1, 0] - qdot[0, 0]) / v == pytest.approx(e, rel=0.01)
 
@@ -184,7 +188,10 @@ def test_momentum_is_kept_to_round_off() -> None:
     assert start[0] < 0.0
     for _, _, qdot in states:
         momentum = 0.125 * qdot[0, :2] + 0.2 * qdot[1, :2]
-        np.testing.assert_allclose(momentum, start, rtol=0.0, atol=1e-15)
+        # round-off: an island of two is one system whose steps are LU solves, which keep
+        # momentum only to their rounding (measured: at most 2.7e-13 kg m/s over 0.12 s, a
+        # part in 1e11; a force law that missed equal and opposite would miss by far more)
+        np.testing.assert_allclose(momentum, start, rtol=0.0, atol=1e-12)
     assert (qdot[1, 0] - qdot[0, 0]) > 0.0  # they collided and parted
 
 

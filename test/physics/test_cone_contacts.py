@@ -95,7 +95,7 @@ def test_the_compiled_pair_law_is_the_reference_one() -> None:
     assert 5 < slid < 55
 
 
-@pytest.mark.parametrize('coupling', ['multirate', 'exact'])
+@pytest.mark.parametrize('coupling', ['island', 'multirate', 'exact'])
 def test_an_oblique_cluster_leaves_as_in_the_dem_reference(coupling: str) -> None:
     content = {'duration': 3.0, 'parameters': 'table2.yaml', 'rotation': ROTATION,
                'interactions': {'enabled': True, 'coupling': coupling},
