@@ -39,7 +39,7 @@ from .integrator import (
     ACTIVE, advance_batch, advance_batch_owned, EXITED, FAILED, REASON_NOT_FINITE,
     REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED,
     STAT_WIDTH, STOPPED)
-from .island import advance_islands, EXACT_PIECES, ISLAND_COUNTERS, ROS34PW2
+from .island import advance_islands, ISLAND_COUNTERS, ROS34PW2
 from .model import STATE_SIZE
 from .neighbours import contact_pairs
 from .params import (
@@ -817,19 +817,14 @@ def warm_up(model: ModelParams | None = None, batched: bool = False) -> None:
     if model is not None:
         couplings = (model.interactions.coupling,) if model.interactions.enabled else ()
     couplings = tuple(c for c in couplings if c not in _LOADED)
-    # the contact kernels (neighbour search, each coupling) with touching pieces: a row of
-    # island.EXACT_PIECES + 1 for the island coupling (its common steps; a row of two, its
-    # small islands), two for the others
+    # the contact kernels (neighbour search, each coupling) with two touching pieces
+    other = (x + 0.045, 0.0, resting_height(base, base.product, x + 0.045, 0.0))
     for coupling in couplings:
         touching = replace(base, interactions=replace(base.interactions, enabled=True,
                                                       coupling=coupling))
         params = SimParams(model=touching, solver=params.solver)
-        rows = (2, EXACT_PIECES + 1) if coupling == 'island' else (2,)
-        for count in rows:
-            row = [(0.05 + 0.045 * k, 0.0, resting_height(base, base.product, 0.05 + 0.045 * k,
-                                                         0.0)) for k in range(count)]
-            state, _ = add_particles(SimState(), params, row, None, None, omega=0.0)
-            advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
+        state, _ = add_particles(SimState(), params, [start, other], None, None, omega=0.0)
+        advance(state, params, RotationProfile.constant(1.0), 1.0e-3)
         _LOADED.add(coupling)
 
 

@@ -547,7 +547,7 @@ def test_no_contact_kernel_is_compiled_inside_a_tick() -> None:
                      feed=FeedParams(rate=0.0))
         loaded = [list(k.signatures) for k in kernels]
         assert all(loaded)  # the engine loaded them when built
-        # a row of five touching pieces: an island of common steps (and two of two)
+        # a row of five touching pieces: one island
         eng.spawn([resting(0.02 + 0.046 * k, 0.0) for k in range(5)])
         for _ in range(30):
             eng.tick()

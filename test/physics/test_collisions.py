@@ -188,10 +188,7 @@ def test_momentum_is_kept_to_round_off() -> None:
     assert start[0] < 0.0
     for _, _, qdot in states:
         momentum = 0.125 * qdot[0, :2] + 0.2 * qdot[1, :2]
-        # round-off: an island of two is one system whose steps are LU solves, which keep
-        # momentum only to their rounding (measured: at most 2.7e-13 kg m/s over 0.12 s, a
-        # part in 1e11; a force law that missed equal and opposite would miss by far more)
-        np.testing.assert_allclose(momentum, start, rtol=0.0, atol=1e-12)
+        np.testing.assert_allclose(momentum, start, rtol=0.0, atol=1e-15)
     assert (qdot[1, 0] - qdot[0, 0]) > 0.0  # they collided and parted
 
 
