@@ -60,11 +60,13 @@ import numpy as np
 from .feed import check_feed_fits, draw_feed, FEED_LIMITS, FeedParams
 from ..errors import ConeFeederError, InputError, ParameterError, ScenarioError, Stopped
 from ..physics.params import (
-    check_integer, check_number, Limit, ModelParams, P_M, ProductParams, SolverParams)
+    check_integer, check_number, Limit, ModelParams, P_M, product_row, PRODUCT_WIDTH,
+    ProductParams, SolverParams)
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import (
     add_particles, advance, advance_many, as_points, check_positions, ExitEvents, Failure,
-    position_problems, SimParams, SimState, StepResult, StepStats, warm_up, world_from_cone)
+    overlap_problems, position_problems, SimParams, SimState, StepResult, StepStats, warm_up,
+    world_from_cone)
 from ..physics.stop import StopFlag
 from ..weigher.combination import warm_up as warm_up_weigher
 from ..weigher.machine import check_machine, Pack, Weigher, WeigherParams, WeigherStats
@@ -666,6 +668,8 @@ class FeederEngine:
             self._command_time = t0
         elif isinstance(item, SpawnRequest):
             item = self._bounded(item)
+            if item is not None and self._config.model.interactions.enabled:
+                item = self._apart(item)
             if item is None:
                 return np.zeros(0, dtype=np.int64)
             self._state, ids = add_particles(self._state, self._sim_params, item.positions,
@@ -696,6 +700,25 @@ class FeederEngine:
         return SpawnRequest(item.positions[:room],
                             None if item.velocities is None else item.velocities[:room],
                             None if item.products is None else item.products[:room])
+
+    def _apart(self, item: SpawnRequest) -> SpawnRequest | None:
+        """Return the part of a spawn whose pieces start apart enough; refuse the rest."""
+        model = self._config.model
+        products = item.products or [model.product] * item.positions.shape[0]
+        rows = np.array([product_row(p) for p in products]).reshape(-1, PRODUCT_WIDTH)
+        here, _, _ = world_from_cone(self._state.y, self._state.angle, self._omega)
+        valid, reasons = overlap_problems(item.positions, rows, here, self._state.products,
+                                          self._state.ids)
+        if not reasons:
+            return item
+        self._refusals.append(Refusal('spawn', len(reasons), '; '.join(reasons[:5])
+                                      + (' ...' if len(reasons) > 5 else '')))
+        if not valid.any():
+            return None
+        return SpawnRequest(item.positions[valid],
+                            None if item.velocities is None else item.velocities[valid],
+                            None if item.products is None else tuple(
+                                p for p, keep in zip(item.products, valid) if keep))
 
     def _feed_pieces(self) -> np.ndarray:
         """Drop this tick's feed pieces (:func:`~.feed.draw_feed`); return their ids."""

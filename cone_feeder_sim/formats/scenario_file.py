@@ -54,9 +54,9 @@ from ..errors import ConeFeederError, ScenarioError
 from ..feeder.feed import check_feed_fits, feed_from_mapping
 from ..feeder.scenario import check_output_count, ParticleSpec, Scenario
 from ..physics.params import (
-    interaction_params_from_mapping, PRODUCT_LIMITS, solver_params_from_mapping)
+    interaction_params_from_mapping, PRODUCT_LIMITS, product_row, solver_params_from_mapping)
 from ..physics.rotation import RotationProfile
-from ..physics.simulation import check_positions, resting_height
+from ..physics.simulation import check_positions, overlap_problems, resting_height
 from ..weigher.machine import check_machine
 
 SCENARIO_KEYS = ('duration', 'parameters', 'model', 'solver', 'interactions', 'weigher',
@@ -159,6 +159,13 @@ def scenario_from_mapping(content: Any, base_dir: Path | None = None) -> Scenari
         except ScenarioError as exc:
             raise ScenarioError(f'{where}: {exc}') from exc
         particles.append(ParticleSpec(position=position, velocity=velocity, product=product))
+    if model.interactions.enabled and particles:
+        positions = np.array([spec.position for spec in particles])
+        rows = np.array([product_row(spec.product) for spec in particles])
+        _, problems = overlap_problems(positions, rows, np.zeros((0, 3)),
+                                       np.zeros((0, rows.shape[1])), label='particles')
+        if problems:
+            raise ScenarioError(problems[0])
     weigher = None
     if 'weigher' in content:  # weigher: {} is the default machine of config/weigher.yaml
         try:

@@ -278,6 +278,49 @@ def position_problems(model: ModelParams, positions: np.ndarray,
     return valid, reasons
 
 
+#: Pieces that touch may start pressed into each other by at most this fraction of the sum
+#: of their radii (10 mm for two default pieces): deeper, the pair law throws them apart
+#: with a force of newtons in microseconds, and a spawn of coincident pieces took a tick of
+#: minutes. A start deeper in is refused (:func:`overlap_problems`).
+MAX_START_OVERLAP = 0.2
+
+
+def overlap_problems(positions: np.ndarray, products: np.ndarray, others: np.ndarray,
+                     other_products: np.ndarray, other_ids: np.ndarray | None = None,
+                     label: str = 'position') -> tuple[np.ndarray, list[str]]:
+    """
+    Check new pieces against each other and the pieces already there; vectorised.
+
+    positions (M, 3), products (M, W) the new pieces (in order: a piece refused does not
+    count against the later ones); others (K, 3), other_products (K, W) those on the cone
+    (world frame, m). A new piece is refused when it is pressed into another by more than
+    MAX_START_OVERLAP of their radii' sum. Returns the mask of the accepted ones and the
+    reasons, naming the index (``label[i]``; the other piece by its id, or its index).
+    """
+    count = positions.shape[0]
+    x = np.concatenate([others, positions]).reshape(-1, 3)
+    radius = np.concatenate([other_products[:, P_S0], products[:, P_S0]])
+    valid = np.ones(count, dtype=bool)
+    reasons: list[str] = []
+    if count == 0 or not np.all(np.isfinite(x)):
+        return valid, reasons
+    pairs = contact_pairs(x, (1.0 - MAX_START_OVERLAP) * radius)
+    base = others.shape[0]
+    pairs = pairs[pairs[:, 1] >= base]  # a new piece in each (the second: i < j)
+    for i, j in pairs:
+        if not valid[j - base] or (i >= base and not valid[i - base]):
+            continue
+        valid[j - base] = False
+        depth = radius[i] + radius[j] - float(np.linalg.norm(x[i] - x[j]))
+        other = (f'piece {int(other_ids[i])}' if other_ids is not None and i < base else
+                 f'{label}[{i - base}]' if i >= base else f'piece {i}')
+        reasons.append(f'{label}[{j - base}] {positions[j - base].tolist()} is pressed '
+                       f'{1e3 * depth:.1f} mm into {other} (at most '
+                       f'{1e3 * MAX_START_OVERLAP * (radius[i] + radius[j]):.1f} mm: pieces '
+                       'that touch do not start inside each other)')
+    return valid, reasons
+
+
 def check_positions(model: ModelParams, positions: np.ndarray,
                     max_height: float = math.inf) -> None:
     """Refuse positions outside the cone, below its surface or above max_height (m)."""

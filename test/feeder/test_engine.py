@@ -554,6 +554,27 @@ def test_no_contact_kernel_is_compiled_inside_a_tick() -> None:
         assert [list(k.signatures) for k in kernels] == loaded
 
 
+def test_pieces_that_touch_are_not_spawned_inside_each_other() -> None:
+    # a thousand pieces at one place: one is placed, the others refused with the reason
+    # (pressed 50 mm into another); pieces pressed in by less than 10 mm are placed
+    eng = engine(model=ModelParams(interactions=InteractionParams(enabled=True)),
+                 feed=FeedParams(rate=0.0, max_pieces=2000))
+    eng.spawn(np.tile(resting(0.1, 0.0), (1000, 1)))
+    result = eng.tick()
+    assert eng.piece_count == 1 and result.refusals[0].count == 999
+    assert 'position[1] ' in result.refusals[0].reason
+    assert 'is pressed 50.0 mm into position[0] (at most 10.0 mm' in result.refusals[0].reason
+    eng.spawn([resting(0.1, 0.045), resting(0.1, -0.03)])  # 5 mm in; 20 mm into piece 0
+    result = eng.tick()
+    assert eng.piece_count == 2 and result.refusals[0].count == 1
+    reason = result.refusals[0].reason
+    assert 'position[1]' in reason and 'into piece 0' in reason
+    alone = engine(feed=FeedParams(rate=0.0))  # the paper's model: pieces pass through
+    alone.spawn(np.tile(resting(0.1, 0.0), (3, 1)))
+    alone.tick()
+    assert alone.piece_count == 3
+
+
 def test_the_weigher_below_the_cone_takes_every_exit() -> None:
     from cone_feeder_sim.weigher.machine import WeigherParams
     weigher = WeigherParams(target=0.2, transport_time=0.5, load_cell_noise=0.0)

@@ -110,6 +110,16 @@ def test_a_run_asks_for_a_bounded_number_of_outputs() -> None:
         run_scenario(replace(at_bound, output_interval=1e-12))
 
 
+def test_pieces_that_touch_do_not_start_inside_each_other() -> None:
+    pieces = [{'position': [0.1, 0.0, 0.03]}, {'position': [0.1, 0.03, 0.03]}]
+    content = {**VALID, 'particles': pieces, 'interactions': {'enabled': True}}
+    with pytest.raises(ScenarioError, match=r'particles\[1\] .* is pressed 20.0 mm into '
+                                            r'particles\[0\] \(at most 10.0 mm'):
+        scenario_from_mapping(content)
+    assert len(scenario_from_mapping({**content, 'interactions': {'enabled': False}})
+               .particles) == 2  # the paper's model: they pass through each other
+
+
 def test_a_feed_makes_the_particles_optional() -> None:
     content = {k: v for k, v in VALID.items() if k != 'particles'}
     with pytest.raises(ScenarioError, match="missing the key 'particles'"):

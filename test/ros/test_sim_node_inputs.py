@@ -95,7 +95,7 @@ def test_a_spawn_beyond_max_pieces_is_refused_for_the_excess(ros: Ros) -> None:
     pub = ros.client.create_publisher(PoseArray, 'spawn', 10)
     pub.publish(grid(5))
     assert ros.spin_until(lambda: len(sim.engine.pending) == 1, 20.0)
-    pub.publish(grid(12))  # more than feed.max_pieces in one message: 4 refused at once
+    pub.publish(grid(12, z=0.12))  # more than feed.max_pieces at once: 4 refused; above
     assert ros.spin_until(lambda: sim.totals.refused >= 4, 20.0)
     step(ros, sim)
     # the second request (8 after the node's cut) meets 5 pieces: 5 refused when applied
