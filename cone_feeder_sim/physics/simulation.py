@@ -39,7 +39,8 @@ from .integrator import (
     ACTIVE, advance_batch, advance_batch_owned, EXITED, FAILED, REASON_NOT_FINITE,
     REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS, STAT_ACCEPTED, STAT_REASON, STAT_REJECTED,
     STAT_WIDTH, STOPPED)
-from .island import advance_islands, ISLAND_COUNTERS, ROS34PW2
+from .island import (
+    advance_islands, IC_ACCEPTED, IC_REFINED, IC_STEPS, ISLAND_COUNTERS, ROS34PW2)
 from .model import STATE_SIZE
 from .neighbours import contact_pairs
 from .params import (
@@ -165,9 +166,10 @@ class StepStats:
     largest_island: pieces in the largest contact island of the interval (0 without
     contact): pieces linked by pairs within reach. contacts: pairs touching at the end of
     the interval (each with its history). coupling_intervals, coupling_rejected: the
-    multirate coupling's accepted and rejected intervals; coupling_forced: intervals
-    accepted at the shortest interval although their error estimate was above the
-    tolerance (:mod:`coupling`).
+    island coupling's accepted and rejected common steps, or the multirate coupling's
+    intervals; coupling_forced: multirate intervals accepted at the shortest interval
+    although their error estimate was above the tolerance (:mod:`coupling`); refined:
+    pieces the island coupling refined alone in its accepted steps (:mod:`island`).
     """
 
     accepted: int
@@ -178,6 +180,7 @@ class StepStats:
     coupling_intervals: int = 0
     coupling_rejected: int = 0
     coupling_forced: int = 0
+    refined: int = 0
 
 
 @dataclass(frozen=True)
@@ -469,6 +472,7 @@ class _Work:
         self.t_event = np.zeros(n)
         self.stats = np.zeros((n, STAT_WIDTH), dtype=np.int64)
         self.counters = np.zeros(COUPLING_STAT_WIDTH, dtype=np.int64)
+        self.refined = 0
         self.largest_island = 0
         self.coupling_step = state.coupling_step
         self.contact_ids = np.zeros((0, 2), dtype=np.int64)
@@ -499,7 +503,7 @@ def _result(state: SimState, params: SimParams, profile: RotationProfile, t1: fl
                            contacts=int(work.contact_ids.shape[0]),
                            coupling_intervals=int(counters[CST_ACCEPTED]),
                            coupling_rejected=int(counters[CST_REJECTED]),
-                           coupling_forced=int(counters[CST_FORCED]))
+                           coupling_forced=int(counters[CST_FORCED]), refined=work.refined)
     return StepResult(state=new_state, exits=exits, failures=failures, stats=step_stats)
 
 
@@ -619,7 +623,8 @@ def _advance_with_contacts(state: SimState, params: SimParams, profile: Rotation
     _keep_contacts(state, pairs, hist, status, work)
 
 
-ISLAND_TOTALS = np.zeros(ISLAND_COUNTERS, dtype=np.int64)
+#: The method of the island coupling's common steps (benchmarks/island_method.py swaps it).
+ISLAND_METHOD = ROS34PW2
 
 
 def _advance_islands(state: SimState, params: SimParams,
@@ -634,7 +639,7 @@ def _advance_islands(state: SimState, params: SimParams,
     pair_start = np.cumsum([0] + [len(r) for _, _, r in islands]).astype(np.int64)
     island_hist = np.ascontiguousarray(hist[rows])
     counters = np.zeros((len(islands), ISLAND_COUNTERS), dtype=np.int64)
-    method = ROS34PW2
+    method = ISLAND_METHOD
     advance_islands(work.y, island_hist, members, member_start, lpairs, pair_start,
                     state.products, params.interaction_row, params.global_row, *segments,
                     params.model.r, work.step_size, work.status, work.t_event, solver.rtol,
@@ -642,7 +647,10 @@ def _advance_islands(state: SimState, params: SimParams,
                     work.stats, work.stop, method.a, method.c, method.times, method.d,
                     method.m, method.e, method.gamma, method.order, counters)
     hist[rows] = island_hist
-    ISLAND_TOTALS[:] += counters.sum(axis=0)
+    totals = counters.sum(axis=0)
+    work.counters[CST_ACCEPTED] += totals[IC_ACCEPTED]
+    work.counters[CST_REJECTED] += totals[IC_STEPS] - totals[IC_ACCEPTED]
+    work.refined += int(totals[IC_REFINED])
 
 
 def _advance_multirate(state: SimState, params: SimParams,

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-The couplings of pieces that touch: multirate (the default) against exact (the reference).
+The couplings of pieces that touch: island (the default) and multirate against exact.
 
 The pair law itself is checked against closed forms in test_contact and test_collisions;
 here crowds on the cone: the two couplings agree, momentum and histories are kept, results
@@ -133,6 +133,15 @@ def test_multirate_pieces_take_their_own_steps_inside_the_intervals(crowds: dict
     own = sum(r.stats.accepted for r in crowds['multirate results'])
     assert own > 2 * intervals  # the pieces took their own steps inside the intervals
     assert sum(r.stats.coupling_forced for r in crowds['multirate results']) == 0
+
+
+def test_island_steps_are_counted_and_fast_pieces_refined(crowds: dict) -> None:
+    results = crowds['island results']
+    steps = sum(r.stats.coupling_intervals for r in results)
+    assert steps > 20  # common steps of the islands
+    assert sum(r.stats.coupling_rejected for r in results) < steps
+    assert sum(r.stats.refined for r in results) > 0  # the dropped pieces hit the crowd
+    assert all(r.stats.refined == 0 for r in crowds['exact results'])
 
 
 @pytest.mark.parametrize('coupling', ['island', 'multirate'])
