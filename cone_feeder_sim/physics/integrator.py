@@ -36,7 +36,7 @@ import math
 import numba
 import numpy as np
 
-from .model import rhs, STATE_SIZE
+from .model import STATE_SIZE
 from .rosenbrock import add_load, ERROR_ORDER, prepare_step, rodas_step
 from .stop import stop_requested
 
@@ -213,11 +213,10 @@ def advance_particle(y, product, machine, seg_t, seg_omega, seg_domega, r_exit, 
             h = remaining if truncated else h_prop
             omega0 = omega_s + domega * (t - t_seg)
             if fresh:
-                rhs(y, product, machine, omega0, domega, f0)
+                prepare_step(y, omega0, domega, product, machine, work, k, f0)
                 for a in range(3):
                     load_now[a] = load[a] + rate[a] * (t - seg_t[0])
                 add_load(load_now, rate, 0.0, f0)
-                prepare_step(y, omega0, domega, product, machine, work, k)
                 for a in range(3):
                     k[7, 3 + a] += rate[a]
                 fresh = False

@@ -38,6 +38,7 @@ the integrator can call them per particle.
 import math
 
 import numba
+import numpy as np
 
 from .params import (
     G_EPS, G_G, G_H, G_K, G_LITERAL, G_TANGENTIAL, G_TIP_EPS, P_C_S, P_D, P_M, P_MU_C, P_QDOT_F,
@@ -64,8 +65,14 @@ def relative_velocity(q, qdot, omega):
 def friction_direction(u0, u1, u2, epsilon):
     """Return (e_v, v): e_v = -u/(|u| + epsilon) (eq. 4) and v = |u| (eq. 5)."""
     v = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    return direction_of(u0, u1, u2, v, epsilon), v
+
+
+@jit
+def direction_of(u0, u1, u2, v, epsilon):
+    """Return e_v = -u/(v + epsilon) (eq. 4) for v = |u| already known, as 3 floats."""
     s = -1.0 / (v + epsilon)
-    return (s * u0, s * u1, s * u2), v
+    return s * u0, s * u1, s * u2
 
 
 # --- eqs. (6)-(10): static friction ------------------------------------------------------
@@ -173,7 +180,10 @@ def friction_target(u0, u1, u2, u_n, v_full, n_fric, r_a_act, e0, e1, e2, produc
     if machine[G_TANGENTIAL] != 0.0:
         c = u_n / (e0 * e0 + e1 * e1 + e2 * e2)
         u0, u1, u2 = u0 - c * e0, u1 - c * e1, u2 - c * e2
-    (ev0, ev1, ev2), v = friction_direction(u0, u1, u2, machine[G_EPS])
+        (ev0, ev1, ev2), v = friction_direction(u0, u1, u2, machine[G_EPS])
+    else:  # u is the full relative velocity: its norm is v_full, not taken again
+        v = v_full
+        ev0, ev1, ev2 = direction_of(u0, u1, u2, v, machine[G_EPS])
     mag = static_friction_magnitude(v, n_fric, r_a_act, product[P_D], product[P_MU_C],
                                     product[P_V_C], product[P_V_S], product[P_C_S])
     rate = filter_gain(v_full, product[P_QDOT_F]) / product[P_T_F]
@@ -237,14 +247,27 @@ def rhs(y, product, machine, omega, domega, out):
     v_full = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
     q0, q1, q2, rate = friction_target(w0, w1, w2, v_perp, v_full, n_fric, r_a_act, e0, e1,
                                        e2, product, machine)
-    m = product[P_M]
+    write_field(y, product[P_M], machine[G_G], omega, domega, n_force, e0, e1, e2, q0, q1, q2,
+                rate, out)
+
+
+@jit
+def write_field(y, m, g, omega, domega, n_force, e0, e1, e2, q0, q1, q2, rate, out):
+    """
+    Write dy/dt of :func:`rhs` into out (9,) from the forces at y.
+
+    m (kg), g (m/s^2); n_force (N) along e = (e0, e1, e2); Q_s^c = (q0, q1, q2) (N) the
+    filter's target and rate (1/s) its gain; plus the rotating frame's terms.
+    """
+    x0, x1 = y[0], y[1]
+    w0, w1, w2 = y[3], y[4], y[5]
     om2 = omega * omega
     out[0] = w0
     out[1] = w1
     out[2] = w2
     out[3] = (y[6] + n_force * e0) / m + 2.0 * omega * w1 + om2 * x0 + domega * x1
     out[4] = (y[7] + n_force * e1) / m - 2.0 * omega * w0 + om2 * x1 - domega * x0
-    out[5] = (y[8] + n_force * e2) / m - machine[G_G]
+    out[5] = (y[8] + n_force * e2) / m - g
     out[6] = rate * (q0 - y[6]) + omega * y[7]
     out[7] = rate * (q1 - y[7]) - omega * y[6]
     out[8] = rate * (q2 - y[8])
@@ -276,12 +299,20 @@ def _vec3(a, b, c):
 
 @jit
 def jacobian(y, product, machine, omega, domega, jac):
-    """
-    Write the exact Jacobian d(rhs)/dy, shape (9, 9), of :func:`rhs` into jac.
+    """Write the exact Jacobian d(rhs)/dy, shape (9, 9), of :func:`rhs` into jac."""
+    rhs_jacobian(y, product, machine, omega, domega, np.empty(STATE_SIZE), jac)
 
-    Derived by hand from the functions above; test_model checks it against finite
-    differences for both friction-direction options and both normal-force readings.
-    Allocates nothing (small vectors are tuples), so it is cheap inside the step loop.
+
+@jit
+def rhs_jacobian(y, product, machine, omega, domega, out, jac):
+    """
+    Write :func:`rhs` into out (9,) and its exact Jacobian d(rhs)/dy into jac (9, 9).
+
+    One call at the same point: the radius, the activation, the speed and the friction
+    curve's exp and tanh are evaluated once for both; out is bit for bit what :func:`rhs`
+    gives (test_model). The Jacobian is derived by hand from the functions above;
+    test_model checks it against finite differences for both friction-direction options
+    and both normal-force readings. Small vectors are tuples.
     """
     h = machine[G_H]
     k = machine[G_K]
@@ -368,6 +399,22 @@ def jacobian(y, product, machine, omega, domega, jac):
     dpsi_dn = dphi_dn / ve
     dpsi_dra = dphi_dra / ve
     inv_v = 1.0 / v if v > 0.0 else 0.0  # grad v = u^T du/dz / v, taken as 0 where u = 0
+    # the field itself, as rhs evaluates it (its normal velocity and force are its own)
+    v_perp_f = normal_velocity(x0, x1, w[0], w[1], w[2], k, rho)
+    n_force_f = r_a_act * constraint_force(v_perp_f, r_d, r_f)
+    n_fric_f = n_force_f / r_f if machine[G_LITERAL] != 0.0 else n_force_f
+    if machine[G_TANGENTIAL] != 0.0:
+        v_full = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        q0, q1, q2, rate_f = friction_target(w[0], w[1], w[2], v_perp_f, v_full, n_fric_f,
+                                             r_a_act, g[0], g[1], g[2], product, machine)
+    else:  # u = w: the speed, exp and tanh of the friction curve are the ones above
+        f_delta_f = c_s * n_fric_f - r_a_act * d * v_s
+        mag = r_a_act * d * v + mu_c * n_fric_f * th_v + f_delta_f * sig
+        ev0, ev1, ev2 = direction_of(w[0], w[1], w[2], v, eps)
+        q0, q1, q2 = mag * ev0, mag * ev1, mag * ev2
+        rate_f = filter_gain(v, qf) / t_f
+    write_field(y, m, machine[G_G], omega, domega, n_force_f, g[0], g[1], g[2], q0, q1, q2,
+                rate_f, out)
     # filter gain a(|w|)
     ea = math.exp(-(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / (qf * qf))
     rate = (1.0 - ea) / t_f

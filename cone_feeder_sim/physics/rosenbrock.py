@@ -31,7 +31,7 @@ checks the order of convergence on problems with exact solutions.
 import numba
 import numpy as np
 
-from .model import jacobian, rhs, rhs_omega_derivative
+from .model import rhs, rhs_jacobian, rhs_omega_derivative
 
 jit = numba.njit(cache=True, error_model='numpy', nogil=True)
 
@@ -255,16 +255,16 @@ def add_load(load, rate, dt, f):
 
 
 @jit
-def prepare_step(y0, omega0, domega, product, machine, work, k):
+def prepare_step(y0, omega0, domega, product, machine, work, k, f0):
     """
     Evaluate what a step from y0 needs, whatever its size.
 
-    The Jacobian goes into work[0] and the time derivative of the field,
-    domega * df/domega, into k[7].
+    The field goes into f0 (9,), the Jacobian into work[0] (one call at the same point)
+    and the time derivative of the field, domega * df/domega, into k[7].
 
     A rejected step is retried with the same Jacobian: only W = I/(gamma h) - J changes.
     """
-    jacobian(y0, product, machine, omega0, domega, work[0])
+    rhs_jacobian(y0, product, machine, omega0, domega, f0, work[0])
     ft = k[7]
     rhs_omega_derivative(y0, omega0, ft)
     for i in range(ft.shape[0]):

@@ -223,6 +223,28 @@ def test_jacobian_matches_finite_differences(literal: bool, tangential: bool) ->
         assert np.max(np.abs(jac - numeric) / scale) < 1e-6
 
 
+@pytest.mark.parametrize('literal', [False, True])
+@pytest.mark.parametrize('tangential', [False, True])
+def test_the_field_with_the_jacobian_is_the_field_bit_for_bit(
+        literal: bool, tangential: bool) -> None:
+    machine = ModelParams(normal_force='literal' if literal else 'newton',
+                          friction_direction='tangential' if tangential else 'full').global_row()
+    rng = np.random.default_rng(11)
+    alone, together = np.zeros(9), np.zeros(9)
+    jac, jac_alone = np.zeros((9, 9)), np.zeros((9, 9))
+    for scale in (0.0, 1e-6, 1e-3, 0.3, 3.0):  # at rest, sticking, slipping, flying
+        for _ in range(40):
+            y = np.concatenate([[rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2),
+                                 rng.uniform(0.0, 0.06)], rng.normal(0, scale, 3),
+                                rng.normal(0, 1.0, 3)])
+            omega, domega = rng.uniform(-10, 10), rng.uniform(-30, 30)
+            model.rhs(y, PP, machine, omega, domega, alone)
+            model.rhs_jacobian(y, PP, machine, omega, domega, together, jac)
+            model.jacobian(y, PP, machine, omega, domega, jac_alone)
+            assert alone.tobytes() == together.tobytes()
+            assert jac.tobytes() == jac_alone.tobytes()
+
+
 def test_omega_derivative_matches_finite_differences() -> None:
     y = np.array([0.1, -0.03, 0.035, 1e-3, 2e-3, -1e-3, 0.3, -0.2, 0.1])
     fp, fm, d = np.zeros(9), np.zeros(9), np.zeros(9)

@@ -86,8 +86,7 @@ def _fixed_step_error(n: int, t_end: float, omega0: float, domega: float) -> flo
     h = t_end / n
     for i in range(n):
         omega = omega0 + domega * i * h
-        model.rhs(y, PP, GP, omega, domega, f0)
-        rosenbrock.prepare_step(y, omega, domega, PP, GP, work, k)
+        rosenbrock.prepare_step(y, omega, domega, PP, GP, work, k, f0)
         assert rosenbrock.rodas_step(y, f0, h, omega, domega, PP, GP, NO_LOAD, NO_LOAD, work,
                                      piv, k, y1)
         y = y1.copy()
@@ -112,8 +111,7 @@ def test_embedded_error_estimate_is_small_on_exact_polynomial_free_fall() -> Non
     work = np.zeros((2, 9, 9))
     piv = np.zeros((2, 3), dtype=np.int64)
     k = np.zeros((9, 9))
-    model.rhs(y, PP, GP, 0.0, 0.0, f0)
-    rosenbrock.prepare_step(y, 0.0, 0.0, PP, GP, work, k)
+    rosenbrock.prepare_step(y, 0.0, 0.0, PP, GP, work, k, f0)
     assert rosenbrock.rodas_step(y, f0, 0.1, 0.0, 0.0, PP, GP, NO_LOAD, NO_LOAD, work, piv, k,
                                  y1)
     np.testing.assert_allclose(y1[:6], _free_flight(0.1, 0.0, 0.0)[:6], atol=1e-14)
