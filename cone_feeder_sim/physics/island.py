@@ -286,7 +286,7 @@ def w_step(y0, hist0, f0, fh0, ft, h, omega0, domega, members, lpairs, active, p
     inv_h = 1.0 / h
     for p in range(n):
         if active[p] and not factor_mechanical(jac[p], alpha, lu[p, 0], lu[p, 1], lu[p, 2],
-                                               piv[p, 0], piv[p, 1]):
+                                               piv[p, 1]):
             return False
     for i in range(s):
         if i == 0:
@@ -318,7 +318,7 @@ def w_step(y0, hist0, f0, fh0, ft, h, omega0, domega, members, lpairs, active, p
                 for j in range(i):
                     acc += c_tab[i, j] * inv_h * u[j, p, a]
                 u[i, p, a] = acc
-            solve_mechanical(jac[p], alpha, lu[p, 0], lu[p, 1], piv[p, 0], piv[p, 1], u[i], p)
+            solve_mechanical(jac[p], alpha, lu[p, 0], lu[p, 1], piv[p, 1], u[i], p)
         for q in range(m):
             for a in range(3):
                 acc = fhs[q, a]

@@ -144,25 +144,55 @@ def factor3(a, piv):
 
 
 @jit
-def eliminate_filter(jac, alpha, lu_m, piv_m, tmat, s):
+def invert_filter_block(jac, alpha, m_inv):
+    """
+    Write M^-1 into m_inv (3, 3), M = alpha I - F, in closed form; False if M is singular.
+
+    F = J[6:9, 6:9], the filter's block, has the form [[f00, f01, 0], [f10, f11, 0],
+    [0, 0, f22]] (the filter's rate on the diagonal, the turning frame's omega coupling the
+    first two rows; :func:`.model.rhs_jacobian`): a 2x2 block and a scalar.
+    """
+    a00 = alpha - jac[6, 6]
+    a01 = -jac[6, 7]
+    a10 = -jac[7, 6]
+    a11 = alpha - jac[7, 7]
+    a22 = alpha - jac[8, 8]
+    det = a00 * a11 - a01 * a10
+    if not (det != 0.0 and np.isfinite(det) and a22 != 0.0 and np.isfinite(a22)):
+        return False
+    inv = 1.0 / det
+    m_inv[0, 0] = a11 * inv
+    m_inv[0, 1] = -a01 * inv
+    m_inv[1, 0] = -a10 * inv
+    m_inv[1, 1] = a00 * inv
+    m_inv[2, 2] = 1.0 / a22
+    return True
+
+
+@jit
+def filter_solve(m_inv, b0, b1, b2):
+    """Return M^-1 b as a tuple, m_inv from :func:`invert_filter_block`."""
+    return (m_inv[0, 0] * b0 + m_inv[0, 1] * b1, m_inv[1, 0] * b0 + m_inv[1, 1] * b1,
+            m_inv[2, 2] * b2)
+
+
+@jit
+def eliminate_filter(jac, alpha, m_inv, tmat, s):
     """
     Eliminate x and P from W = alpha I - J; write the velocity block S into s (3, 3).
 
-    J as in :func:`factor_mechanical`: lu_m, piv_m receive LU(M), M = alpha I - F; tmat (3, 3)
-    receives T = M^-1 (D/alpha + E); s = alpha I - B - A/alpha - C T, not factored (the
-    contact kernels add pair blocks to it). Returns False if M cannot be factored.
+    J as in :func:`factor_mechanical`: m_inv (3, 3) receives M^-1, M = alpha I - F
+    (:func:`invert_filter_block`); tmat (3, 3) receives T = M^-1 (D/alpha + E);
+    s = alpha I - B - A/alpha - C T, not factored (the contact kernels add pair blocks to
+    it). Returns False if M is singular.
     """
     inv_a = 1.0 / alpha
-    for i in range(3):
-        for j in range(3):
-            lu_m[i, j] = -jac[6 + i, 6 + j]
-        lu_m[i, i] += alpha
-    if not factor3(lu_m, piv_m):
+    if not invert_filter_block(jac, alpha, m_inv):
         return False
     for j in range(3):
-        c0, c1, c2 = solve3(lu_m, piv_m, jac[6, j] * inv_a + jac[6, 3 + j],
-                            jac[7, j] * inv_a + jac[7, 3 + j],
-                            jac[8, j] * inv_a + jac[8, 3 + j])
+        c0, c1, c2 = filter_solve(m_inv, jac[6, j] * inv_a + jac[6, 3 + j],
+                                  jac[7, j] * inv_a + jac[7, 3 + j],
+                                  jac[8, j] * inv_a + jac[8, 3 + j])
         tmat[0, j] = c0
         tmat[1, j] = c1
         tmat[2, j] = c2
@@ -176,26 +206,26 @@ def eliminate_filter(jac, alpha, lu_m, piv_m, tmat, s):
 
 
 @jit
-def factor_mechanical(jac, alpha, lu_m, lu_s, tmat, piv_m, piv_s):
+def factor_mechanical(jac, alpha, m_inv, lu_s, tmat, piv_s):
     """
     Factor W = alpha I - J for a mechanical system, using its block structure.
 
     J (9, 9) must have the block rows [0, I, 0] (dx/dt = w), [A, B, C] and [D, E, F] for
-    the state blocks (x, w, P). Eliminating x and P leaves two 3x3 systems:
-    M = alpha I - F and the Schur complement S = alpha I - B - A/alpha - C M^-1 (D/alpha + E).
-    lu_m, lu_s (3, 3) receive LU(M) and LU(S) (see :func:`factor3`), tmat (3, 3) is
-    scratch, piv_m, piv_s (3,) receive the pivots. Much cheaper than a dense 9x9
-    factorisation; test_rosenbrock compares it with a dense solve. Returns False if a pivot
-    vanishes or is not finite.
+    the state blocks (x, w, P), F as :func:`invert_filter_block` needs it. Eliminating x and
+    P leaves two 3x3 systems: M = alpha I - F, inverted in closed form, and the Schur
+    complement S = alpha I - B - A/alpha - C M^-1 (D/alpha + E), factored. m_inv (3, 3)
+    receives M^-1, lu_s (3, 3) LU(S) (see :func:`factor3`), tmat (3, 3) is scratch, piv_s
+    (3,) receives S's pivots. Much cheaper than a dense 9x9 factorisation; test_rosenbrock
+    compares it with a dense solve. Returns False if a pivot vanishes or is not finite.
     """
-    if not eliminate_filter(jac, alpha, lu_m, piv_m, tmat, lu_s):
+    if not eliminate_filter(jac, alpha, m_inv, tmat, lu_s):
         return False
     return factor3(lu_s, piv_s)
 
 
 @jit
-def solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, kk, r):
-    """Solve W k = b in place in row r of kk (·, 9), using :func:`factor_mechanical`'s LUs."""
+def solve_mechanical(jac, alpha, m_inv, lu_s, piv_s, kk, r):
+    """Solve W k = b in place in row r of kk (·, 9), using :func:`factor_mechanical`'s."""
     inv_a = 1.0 / alpha
     bx0 = kk[r, 0] * inv_a
     bx1 = kk[r, 1] * inv_a
@@ -204,8 +234,8 @@ def solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, kk, r):
     b7 = kk[r, 7]
     b8 = kk[r, 8]
     # c = M^-1 (b_P + D b_x / alpha)
-    c0, c1, c2 = solve3(
-        lu_m, piv_m,
+    c0, c1, c2 = filter_solve(
+        m_inv,
         b6 + jac[6, 0] * bx0 + jac[6, 1] * bx1 + jac[6, 2] * bx2,
         b7 + jac[7, 0] * bx0 + jac[7, 1] * bx1 + jac[7, 2] * bx2,
         b8 + jac[8, 0] * bx0 + jac[8, 1] * bx1 + jac[8, 2] * bx2)
@@ -222,8 +252,8 @@ def solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, kk, r):
     kx1 = bx1 + kw1 * inv_a
     kx2 = bx2 + kw2 * inv_a
     # k_P = M^-1 (b_P + D k_x + E k_w)
-    kp0, kp1, kp2 = solve3(
-        lu_m, piv_m,
+    kp0, kp1, kp2 = filter_solve(
+        m_inv,
         b6 + jac[6, 0] * kx0 + jac[6, 1] * kx1 + jac[6, 2] * kx2
         + jac[6, 3] * kw0 + jac[6, 4] * kw1 + jac[6, 5] * kw2,
         b7 + jac[7, 0] * kx0 + jac[7, 1] * kx1 + jac[7, 2] * kx2
@@ -291,21 +321,20 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, load, rate, work, pi
     """
     n = y0.shape[0]
     jac = work[0]
-    lu_m = work[1, 0:3, 0:3]
+    m_inv = work[1, 0:3, 0:3]
     lu_s = work[1, 3:6, 0:3]
     tmat = work[1, 6:9, 0:3]
-    piv_m = piv[0]
     piv_s = piv[1]
     f = k[6]
     ft = k[7]
     ys = k[8]
     alpha = 1.0 / (GAMMA * h)
-    if not factor_mechanical(jac, alpha, lu_m, lu_s, tmat, piv_m, piv_s):
+    if not factor_mechanical(jac, alpha, m_inv, lu_s, tmat, piv_s):
         return False
     # stage 1
     for i in range(n):
         k[0, i] = f0[i] + h * D1 * ft[i]
-    solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 0)
+    solve_mechanical(jac, alpha, m_inv, lu_s, piv_s, k, 0)
     # stage 2
     for i in range(n):
         ys[i] = y0[i] + A21 * k[0, i]
@@ -313,7 +342,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, load, rate, work, pi
     add_load(load, rate, C2 * h, f)
     for i in range(n):
         k[1, i] = f[i] + h * D2 * ft[i] + C21 * k[0, i] / h
-    solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 1)
+    solve_mechanical(jac, alpha, m_inv, lu_s, piv_s, k, 1)
     # stage 3
     for i in range(n):
         ys[i] = y0[i] + A31 * k[0, i] + A32 * k[1, i]
@@ -321,7 +350,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, load, rate, work, pi
     add_load(load, rate, C3 * h, f)
     for i in range(n):
         k[2, i] = f[i] + h * D3 * ft[i] + (C31 * k[0, i] + C32 * k[1, i]) / h
-    solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 2)
+    solve_mechanical(jac, alpha, m_inv, lu_s, piv_s, k, 2)
     # stage 4
     for i in range(n):
         ys[i] = y0[i] + A41 * k[0, i] + A42 * k[1, i] + A43 * k[2, i]
@@ -330,7 +359,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, load, rate, work, pi
     for i in range(n):
         k[3, i] = (f[i] + h * D4 * ft[i]
                    + (C41 * k[0, i] + C42 * k[1, i] + C43 * k[2, i]) / h)
-    solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 3)
+    solve_mechanical(jac, alpha, m_inv, lu_s, piv_s, k, 3)
     # stage 5
     for i in range(n):
         ys[i] = y0[i] + A51 * k[0, i] + A52 * k[1, i] + A53 * k[2, i] + A54 * k[3, i]
@@ -340,7 +369,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, load, rate, work, pi
     for i in range(n):
         k[4, i] = f[i] + (C51 * k[0, i] + C52 * k[1, i] + C53 * k[2, i]
                           + C54 * k[3, i]) / h
-    solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 4)
+    solve_mechanical(jac, alpha, m_inv, lu_s, piv_s, k, 4)
     # stage 6 (error estimate)
     for i in range(n):
         ys[i] += k[4, i]
@@ -349,7 +378,7 @@ def rodas_step(y0, f0, h, omega0, domega, product, machine, load, rate, work, pi
     for i in range(n):
         k[5, i] = f[i] + (C61 * k[0, i] + C62 * k[1, i] + C63 * k[2, i] + C64 * k[3, i]
                           + C65 * k[4, i]) / h
-    solve_mechanical(jac, alpha, lu_m, lu_s, piv_m, piv_s, k, 5)
+    solve_mechanical(jac, alpha, m_inv, lu_s, piv_s, k, 5)
     for i in range(n):
         y1[i] = ys[i] + k[5, i]
     return True

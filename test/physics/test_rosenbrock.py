@@ -54,13 +54,12 @@ def test_block_solve_of_w_matches_a_dense_solve() -> None:
         work[0] = jac
         piv = np.zeros((2, 3), dtype=np.int64)
         assert rosenbrock.factor_mechanical(work[0], alpha, work[1, 0:3, 0:3],
-                                            work[1, 3:6, 0:3], work[1, 6:9, 0:3], piv[0],
-                                            piv[1])
+                                            work[1, 3:6, 0:3], work[1, 6:9, 0:3], piv[1])
         b = rng.normal(size=9)
         kk = np.zeros((9, 9))
         kk[2] = b
         rosenbrock.solve_mechanical(work[0], alpha, work[1, 0:3, 0:3], work[1, 3:6, 0:3],
-                                    piv[0], piv[1], kk, 2)
+                                    piv[1], kk, 2)
         dense = np.linalg.solve(alpha * np.eye(9) - jac, b)
         np.testing.assert_allclose(kk[2], dense, rtol=1e-8, atol=1e-12 * np.abs(dense).max())
 
