@@ -126,7 +126,8 @@ def cone_distance(x0, x1, x2, h, k, tip_epsilon):
 @jit
 def constraint_direction(x0, x1, k, rho):
     """Return e_Fc = d v_perp / d qdot = (k x/rho, k y/rho, 1), eq. (36), not normalised."""
-    return (k * x0 / rho, k * x1 / rho, 1.0)
+    k_rho = k / rho
+    return (k_rho * x0, k_rho * x1, 1.0)
 
 
 @jit
@@ -265,9 +266,10 @@ def write_field(y, m, g, omega, domega, n_force, e0, e1, e2, q0, q1, q2, rate, o
     out[0] = w0
     out[1] = w1
     out[2] = w2
-    out[3] = (y[6] + n_force * e0) / m + 2.0 * omega * w1 + om2 * x0 + domega * x1
-    out[4] = (y[7] + n_force * e1) / m - 2.0 * omega * w0 + om2 * x1 - domega * x0
-    out[5] = (y[8] + n_force * e2) / m - g
+    inv_m = 1.0 / m
+    out[3] = (y[6] + n_force * e0) * inv_m + 2.0 * omega * w1 + om2 * x0 + domega * x1
+    out[4] = (y[7] + n_force * e1) * inv_m - 2.0 * omega * w0 + om2 * x1 - domega * x0
+    out[5] = (y[8] + n_force * e2) * inv_m - g
     out[6] = rate * (q0 - y[6]) + omega * y[7]
     out[7] = rate * (q1 - y[7]) - omega * y[6]
     out[8] = rate * (q2 - y[8])
@@ -318,6 +320,7 @@ def rhs_jacobian(y, product, machine, omega, domega, out, jac):
     k = machine[G_K]
     eps = machine[G_EPS]
     m = product[P_M]
+    inv_m = 1.0 / m
     d = product[P_D]
     mu_c = product[P_MU_C]
     v_c = product[P_V_C]
@@ -334,11 +337,12 @@ def rhs_jacobian(y, product, machine, omega, domega, out, jac):
     # geometry: g = grad s_perp = e_Fc, hess = d g / d x (only the x-y block is non-zero)
     rho = regularised_radius(x0, x1, machine[G_TIP_EPS])
     s_perp = x2 - h + k * rho
-    g = _vec3(k * x0 / rho, k * x1 / rho, 1.0)
-    rho3 = rho * rho * rho
-    h00 = k * (1.0 / rho - x0 * x0 / rho3)
-    h01 = -k * x0 * x1 / rho3
-    h11 = k * (1.0 / rho - x1 * x1 / rho3)
+    g = constraint_direction(x0, x1, k, rho)
+    inv_rho = 1.0 / rho
+    k_rho3 = k * inv_rho * inv_rho * inv_rho
+    h00 = k * inv_rho - x0 * x0 * k_rho3
+    h01 = -x0 * x1 * k_rho3
+    h11 = k * inv_rho - x1 * x1 * k_rho3
     hess = (_vec3(h00, h01, 0.0), _vec3(h01, h11, 0.0), _vec3(0.0, 0.0, 0.0))
     v_perp = g[0] * w[0] + g[1] * w[1] + g[2] * w[2]
     hw = _vec3(h00 * w[0] + h01 * w[1], h01 * w[0] + h11 * w[1], 0.0)  # d v_perp / d x
@@ -361,22 +365,22 @@ def rhs_jacobian(y, product, machine, omega, domega, out, jac):
     n_fric = n_force * nscale
     # friction velocity u and its Jacobians du/dx, du/dw
     if machine[G_TANGENTIAL] != 0.0:
-        gn2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2]
-        c = v_perp / gn2
+        ig = 1.0 / (g[0] * g[0] + g[1] * g[1] + g[2] * g[2])  # 1/|g|^2
+        c = v_perp * ig
         u = _vec3(w[0] - c * g[0], w[1] - c * g[1], w[2] - c * g[2])
-        c2 = 2.0 * v_perp / (gn2 * gn2)
-        du_dw = (_vec3(1.0 - g[0] * g[0] / gn2, -g[0] * g[1] / gn2, -g[0] * g[2] / gn2),
-                 _vec3(-g[1] * g[0] / gn2, 1.0 - g[1] * g[1] / gn2, -g[1] * g[2] / gn2),
-                 _vec3(-g[2] * g[0] / gn2, -g[2] * g[1] / gn2, 1.0 - g[2] * g[2] / gn2))
-        du_dx = (_vec3(-(g[0] * hw[0] + v_perp * hess[0][0]) / gn2 + c2 * g[0] * hg[0],
-                       -(g[0] * hw[1] + v_perp * hess[0][1]) / gn2 + c2 * g[0] * hg[1],
-                       -(g[0] * hw[2] + v_perp * hess[0][2]) / gn2 + c2 * g[0] * hg[2]),
-                 _vec3(-(g[1] * hw[0] + v_perp * hess[1][0]) / gn2 + c2 * g[1] * hg[0],
-                       -(g[1] * hw[1] + v_perp * hess[1][1]) / gn2 + c2 * g[1] * hg[1],
-                       -(g[1] * hw[2] + v_perp * hess[1][2]) / gn2 + c2 * g[1] * hg[2]),
-                 _vec3(-(g[2] * hw[0] + v_perp * hess[2][0]) / gn2 + c2 * g[2] * hg[0],
-                       -(g[2] * hw[1] + v_perp * hess[2][1]) / gn2 + c2 * g[2] * hg[1],
-                       -(g[2] * hw[2] + v_perp * hess[2][2]) / gn2 + c2 * g[2] * hg[2]))
+        c2 = 2.0 * v_perp * ig * ig
+        du_dw = (_vec3(1.0 - g[0] * g[0] * ig, -g[0] * g[1] * ig, -g[0] * g[2] * ig),
+                 _vec3(-g[1] * g[0] * ig, 1.0 - g[1] * g[1] * ig, -g[1] * g[2] * ig),
+                 _vec3(-g[2] * g[0] * ig, -g[2] * g[1] * ig, 1.0 - g[2] * g[2] * ig))
+        du_dx = (_vec3(-(g[0] * hw[0] + v_perp * hess[0][0]) * ig + c2 * g[0] * hg[0],
+                       -(g[0] * hw[1] + v_perp * hess[0][1]) * ig + c2 * g[0] * hg[1],
+                       -(g[0] * hw[2] + v_perp * hess[0][2]) * ig + c2 * g[0] * hg[2]),
+                 _vec3(-(g[1] * hw[0] + v_perp * hess[1][0]) * ig + c2 * g[1] * hg[0],
+                       -(g[1] * hw[1] + v_perp * hess[1][1]) * ig + c2 * g[1] * hg[1],
+                       -(g[1] * hw[2] + v_perp * hess[1][2]) * ig + c2 * g[1] * hg[2]),
+                 _vec3(-(g[2] * hw[0] + v_perp * hess[2][0]) * ig + c2 * g[2] * hg[0],
+                       -(g[2] * hw[1] + v_perp * hess[2][1]) * ig + c2 * g[2] * hg[1],
+                       -(g[2] * hw[2] + v_perp * hess[2][2]) * ig + c2 * g[2] * hg[2]))
     else:
         u = w
         du_dw = (_vec3(1.0, 0.0, 0.0), _vec3(0.0, 1.0, 0.0), _vec3(0.0, 0.0, 1.0))
@@ -393,11 +397,11 @@ def rhs_jacobian(y, product, machine, omega, domega, out, jac):
     dphi_dv = r_a_act * d + mu_c * n_fric * (1.0 - th_v * th_v) / v_c + f_delta * dsig
     dphi_dn = (mu_c * th_v + c_s * sig) * nscale
     dphi_dra = d * v - d * v_s * sig
-    ve = v + eps
-    psi = phi / ve
-    dpsi_dv = dphi_dv / ve - phi / (ve * ve)
-    dpsi_dn = dphi_dn / ve
-    dpsi_dra = dphi_dra / ve
+    inv_ve = 1.0 / (v + eps)
+    psi = phi * inv_ve
+    dpsi_dv = (dphi_dv - psi) * inv_ve
+    dpsi_dn = dphi_dn * inv_ve
+    dpsi_dra = dphi_dra * inv_ve
     inv_v = 1.0 / v if v > 0.0 else 0.0  # grad v = u^T du/dz / v, taken as 0 where u = 0
     # the field itself, as rhs evaluates it (its normal velocity and force are its own)
     v_perp_f = normal_velocity(x0, x1, w[0], w[1], w[2], k, rho)
@@ -428,9 +432,9 @@ def rhs_jacobian(y, product, machine, omega, domega, out, jac):
             jac[i, j] = 0.0
             jac[i, 3 + j] = 1.0 if i == j else 0.0
             jac[i, 6 + j] = 0.0
-            jac[3 + i, j] = (g[i] * dn_dx[j] + n_force * hess[i][j]) / m
-            jac[3 + i, 3 + j] = g[i] * dn_dw[j] / m
-            jac[3 + i, 6 + j] = 1.0 / m if i == j else 0.0
+            jac[3 + i, j] = (g[i] * dn_dx[j] + n_force * hess[i][j]) * inv_m
+            jac[3 + i, 3 + j] = g[i] * dn_dw[j] * inv_m
+            jac[3 + i, 6 + j] = inv_m if i == j else 0.0
             jac[6 + i, j] = rate * (-u[i] * dpsi_dx_j - psi * du_dx[i][j])
             jac[6 + i, 3 + j] = ((-psi * u[i] - p[i]) * da * w[j]
                                  + rate * (-u[i] * dpsi_dw_j - psi * du_dw[i][j]))
