@@ -61,6 +61,8 @@ SAFETY = 0.9
 FAC_MIN = 0.2
 FAC_MAX = 6.0
 BISECTION_STEPS = 60
+#: the least error the predictive controller remembers of an accepted step (rodas.f: ERRACC)
+ERROR_FLOOR = 1e-2
 
 
 @jit
@@ -126,12 +128,12 @@ def after_acceptance(t, t_end, h, h_prop, h_max, err, h_acc, err_acc, after_reje
 
     A step truncated at the segment end t_end lands there and keeps the larger of the
     proposal it replaced and the grown step; the previous accepted step and error become
-    this one's (the error floored at 1e-4).
+    this one's (the error floored at ERROR_FLOOR, as rodas.f has it).
     """
     grow = growth_after_acceptance(h, err, h_acc, err_acc, after_rejection, order)
     if truncated:
-        return t_end, min(h_max, max(h_prop, h * grow)), h, max(err, 1e-4)
-    return t + h, min(h_max, h * grow), h, max(err, 1e-4)
+        return t_end, min(h_max, max(h_prop, h * grow)), h, max(err, ERROR_FLOOR)
+    return t + h, min(h_max, h * grow), h, max(err, ERROR_FLOOR)
 
 
 @jit
