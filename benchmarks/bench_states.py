@@ -33,8 +33,9 @@ every row is measured twice, side by side: pieces alone (the paper's model) and 
 touch (the soft-sphere law, :mod:`cone_feeder_sim.physics.contact`), both from places where
 no two pieces overlap (a lattice, in layers when one is not enough), with the cost ratio,
 the largest contact island and the contacts; ``--coupling`` picks how touching pieces are
-integrated (``multirate``, the default, which adds its coupling intervals per simulated
-second, or ``exact``). The calibration workload is printed first. Example::
+integrated (``island``, the default, which adds its common steps per simulated second and
+the pieces it refined alone; ``multirate``, which adds its coupling intervals; or
+``exact``). The calibration workload is printed first. Example::
 
     .venv/bin/python benchmarks/bench_states.py --pieces 20 150 2000 5000
     .venv/bin/python benchmarks/bench_states.py --pieces 150 1000 --interactions
@@ -90,7 +91,7 @@ def places(count: int, lift: float, packed: bool = False) -> np.ndarray:
 
 
 def engine_for(state: str, count: int, contacts: bool, packed: bool,
-               coupling: str = 'multirate',
+               coupling: str = InteractionParams().coupling,
                tolerance: float = 1e-6) -> tuple[FeederEngine, int, int]:
     """Return the engine in ``state`` with ``count`` pieces, warm-up and measured ticks."""
     model = ModelParams(interactions=InteractionParams(enabled=contacts, coupling=coupling,
@@ -112,12 +113,20 @@ def engine_for(state: str, count: int, contacts: bool, packed: bool,
 
 
 def measure(state: str, count: int, contacts: bool = False, packed: bool = False,
-            coupling: str = 'multirate', tolerance: float = 1e-6) -> dict[str, float]:
+            coupling: str = InteractionParams().coupling,
+            tolerance: float = 1e-6) -> dict[str, float]:
     """Run one state with ``count`` pieces; return the figures."""
+    return run_state(state, count, contacts, packed, coupling, tolerance)[0]
+
+
+def run_state(state: str, count: int, contacts: bool = False, packed: bool = False,
+              coupling: str = InteractionParams().coupling,
+              tolerance: float = 1e-6) -> tuple[dict[str, float], FeederEngine]:
+    """Run one state with ``count`` pieces; return the figures and the engine at the end."""
     engine, warm, ticks = engine_for(state, count, contacts, packed, coupling, tolerance)
     for _ in range(warm):
         engine.tick()
-    durations, piece_seconds, steps, island, cut, intervals = [], 0.0, 0, 0, 0, 0
+    durations, piece_seconds, steps, island, cut, intervals, refined = [], 0.0, 0, 0, 0, 0, 0
     cpu0 = time.process_time()
     wall0 = time.perf_counter()
     for _ in range(ticks):
@@ -130,12 +139,14 @@ def measure(state: str, count: int, contacts: bool = False, packed: bool = False
         island = max(island, result.stats.largest_island)
         cut = max(cut, result.stats.contacts)
         intervals += result.stats.coupling_intervals + result.stats.coupling_rejected
+        refined += result.stats.refined
     wall = time.perf_counter() - wall0
     cpu = time.process_time() - cpu0
     return {'pieces': engine.piece_count, 'per_cpu': piece_seconds / cpu,
             'steps': steps / max(piece_seconds, 1e-12), 'capacity': ticks * engine.dt / wall,
             'median_ms': 1e3 * statistics.median(durations), 'max_ms': 1e3 * max(durations),
-            'island': island, 'cut': cut, 'intervals': intervals / (ticks * engine.dt)}
+            'island': island, 'cut': cut, 'intervals': intervals / (ticks * engine.dt),
+            'refined': refined / (ticks * engine.dt)}, engine
 
 
 def main() -> None:
@@ -146,7 +157,7 @@ def main() -> None:
     parser.add_argument('--interactions', action='store_true',
                         help='measure each row without and with contact between pieces')
     parser.add_argument('--coupling', choices=('island', 'exact', 'multirate'),
-                        default='multirate',
+                        default=InteractionParams().coupling,
                         help='with --interactions: how touching pieces are integrated')
     parser.add_argument('--coupling-tolerance', type=float,
                         default=InteractionParams().coupling_tolerance,
@@ -175,10 +186,12 @@ def compare(args: argparse.Namespace) -> None:
           'without per particle-second; island = most pieces in one contact island; '
           'contacts = most touching pairs at a tick end; coupling '
           f'{args.coupling} (tolerance {args.coupling_tolerance:g} m): '
-          'steps = per particle-second alone / with contact, intervals = coupling '
-          'intervals per simulated s (multirate)')
+          'steps = per particle-second alone / with contact, intervals = common steps '
+          '(island) or coupling intervals (multirate) per simulated s, refined = pieces '
+          'refined alone per simulated s (island)')
     print(f'{"state":>10} {"N":>6} {"without":>9} {"with":>9} {"ratio":>6} {"capacity":>9} '
-          f'{"max ms":>8} {"island":>9} {"contacts":>8} {"steps":>13} {"intervals":>9}')
+          f'{"max ms":>8} {"island":>9} {"contacts":>8} {"steps":>13} {"intervals":>9} '
+          f'{"refined":>8}')
     for state in args.states:
         for count in args.pieces:
             alone = measure(state, count, False, packed=True)
@@ -188,7 +201,8 @@ def compare(args: argparse.Namespace) -> None:
                   f'{touch["per_cpu"]:>9.0f} {alone["per_cpu"] / touch["per_cpu"]:>6.2f} '
                   f'{touch["capacity"]:>9.2f} {touch["max_ms"]:>8.1f} '
                   f'{int(touch["island"]):>9} {int(touch["cut"]):>8} '
-                  f'{alone["steps"]:>6.0f}/{touch["steps"]:<6.0f} {touch["intervals"]:>9.0f}',
+                  f'{alone["steps"]:>6.0f}/{touch["steps"]:<6.0f} {touch["intervals"]:>9.0f} '
+                  f'{touch["refined"]:>8.0f}',
                   flush=True)
 
 
