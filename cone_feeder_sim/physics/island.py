@@ -21,7 +21,7 @@ and all its pieces take a common step of a Rosenbrock-W method. Each stage's fie
 island's whole field at that stage's states: every piece's own field
 (:func:`.model.rhs`), the pair forces (:func:`.contact.force_between`, equal and
 opposite) and the histories' own equation (:func:`.exact.history_rate`). The linear systems
-use each piece's own Jacobian block only (exact, :func:`.model.jacobian`, reduced to 3x3
+use each piece's own Jacobian block only (exact, :func:`.model.rhs_jacobian`, reduced to 3x3
 solves by :func:`.rosenbrock.factor_mechanical`); the histories' block is left out (their
 rates are not stiff). So a stage costs what the pieces alone cost, plus the pairs.
 
@@ -31,7 +31,15 @@ the steps the pieces take (two default pieces pressed 2 mm: about 63 rad/s, 100 
 period). A method whose order does not depend on the Jacobian is needed for that: a W-method,
 :data:`ROS34PW2` (Rang & Angermann 2005, as PETSc's TSROSWRA34PW2: 4 stages, order 3,
 L-stable, stiffly accurate, embedded order 2). RODAS4 with the same block Jacobian loses
-its order on the pair terms (``benchmarks/island_order.py`` measures both).
+its order on the pair terms (``benchmarks/island_method.py`` measures both).
+
+A piece much faster than its island does not set its pace (:func:`advance_island`): the
+common step is sized so that about :data:`REFINED_FRACTION` of the pieces fail their own
+error test, and those, with the pairs that fail, are refined: each connected part of them
+is advanced alone over the step by its own adaptive steps with its loads from the rest of
+the island linear over the step (Savcenco's multirate Rosenbrock); the rest of the island
+is taken again with equal and opposite linear loads, so momentum is kept, and the step
+counts only when the refined parts change the loads at its end within the tolerance.
 
 Error control covers the island's whole state, pieces (as a piece alone) and histories
 (positions' tolerance), at the solver's own tolerances; no coupling tolerance. Pieces that
@@ -55,7 +63,7 @@ from .integrator import (
     ACTIVE, advance_particle, after_acceptance, error_norm, EXITED, FAILED, locate_exit,
     proposal_after_rejection, REASON_NOT_FINITE, REASON_STEP_UNDERFLOW, REASON_TOO_MANY_STEPS,
     STAT_ACCEPTED, STAT_REASON, STAT_REJECTED, STOPPED)
-from .model import jacobian, rhs, rhs_omega_derivative, STATE_SIZE
+from .model import rhs, rhs_jacobian, rhs_omega_derivative, STATE_SIZE
 from .params import P_M
 from .rosenbrock import factor_mechanical, solve_mechanical
 from .stop import stop_requested
@@ -154,6 +162,12 @@ def island_field(ys, hs, members, lpairs, active, products, inter, machine, omeg
                 out[p, 3 + a] += ext[p, a] + ext_rate[p, a] * tau
         else:
             out[p, :] = 0.0
+    add_pairs_field(ys, hs, members, lpairs, active, products, inter, out, hout)
+
+
+@jit
+def add_pairs_field(ys, hs, members, lpairs, active, products, inter, out, hout):
+    """Add the pairs' forces to the pieces' field out (n, 9); write the histories' hout."""
     for q in range(lpairs.shape[0]):
         i = lpairs[q, 0]
         j = lpairs[q, 1]
@@ -393,11 +407,16 @@ def quantile_error(e_mem, active, fraction):
 def prepare(y0, hist0, members, lpairs, active, products, inter, machine, omega0, domega, ext,
             ext_rate, f0, fh0, jac, ft, ft1):
     """Evaluate what every step from (y0, hist0) needs: the field, Jacobians, f_t."""
-    island_field(y0, hist0, members, lpairs, active, products, inter, machine, omega0, domega,
-                 ext, ext_rate, 0.0, f0, fh0)
+    for p in range(y0.shape[0]):  # each piece's field and Jacobian in one call
+        if active[p]:
+            rhs_jacobian(y0[p], products[members[p]], machine, omega0, domega, f0[p], jac[p])
+            for a in range(3):
+                f0[p, 3 + a] += ext[p, a]
+        else:
+            f0[p, :] = 0.0
+    add_pairs_field(y0, hist0, members, lpairs, active, products, inter, f0, fh0)
     for p in range(y0.shape[0]):
         if active[p]:
-            jacobian(y0[p], products[members[p]], machine, omega0, domega, jac[p])
             rhs_omega_derivative(y0[p], omega0, ft1)
             for a in range(STATE_SIZE):
                 ft[p, a] = domega * ft1[a]
