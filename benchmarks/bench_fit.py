@@ -20,10 +20,11 @@ values, sampled at 30 frames/s with 1 mm of noise until each piece leaves the co
 fits, after the calibration line: from the parameter file's values, and from d = 1000,
 mu_C = 0.35 (where one start of single shooting stops in another valley), each with one
 start (``starts: 1``, the ``--quick`` fit, its Jacobian's columns on a thread per core)
-and with the defaults (8 starts on a process per core, profile-likelihood intervals).
+and with the defaults (auto starts on a process per core, profile-likelihood intervals).
 
 Each prints the estimates with their 95 % intervals, the test of fit, how many starts
-reached the lowest cost, the wall time and the simulations (whole runs and windows)::
+reached the lowest cost, the wall time and the simulations (whole runs and windows), and
+where the time went (simulations and wall time of the starts, profiles and restarts)::
 
     .venv/bin/python benchmarks/bench_fit.py
 """
@@ -79,10 +80,11 @@ class Stopwatch:
 TRUTH = set_scenario_key(set_scenario_key(BASE, 'model.d', 315.0), 'model.mu_C', 0.7225)
 
 
-def write_tracks(folder: Path, truth: dict | None = None, seed: int = 5) -> None:
-    """Write 1-mm tracks of ``truth`` (TRUTH) at 30 frames/s, each piece until it leaves."""
+def write_tracks(folder: Path, truth: dict | None = None, seed: int = 5,
+                 rate: float = 30.0) -> None:
+    """Write 1-mm tracks of ``truth`` (TRUTH) at ``rate`` frames/s, each piece until it leaves."""
     scenario = scenario_from_mapping(TRUTH if truth is None else truth)
-    times = np.arange(0.0, 3.0, 1.0 / 30.0)
+    times = np.arange(0.0, 3.0, 1.0 / rate)
     particle = np.tile(np.arange(5), len(times))
     t = np.repeat(times, 5)
     seen = predict(scenario, Tracks(particle, t, np.zeros((len(t), 3))))
@@ -117,7 +119,9 @@ def run(label: str, content: dict, folder: Path) -> None:
           f'{test.reduced:.3g}, {result.reached_best} of {len(result.start_costs)} starts at '
           f'the lowest cost; wall time {wall:.2f} s, {result.simulations} simulations and '
           f'{result.window_simulations} windows ({watch.total:.2f} s simulating in this '
-          'process)', flush=True)
+          'process)\n    stages: ' + ', '.join(
+              f'{name} {n} simulations {t:.2f} s' for name, (n, t) in result.stages.items()),
+          flush=True)
 
 
 @contextlib.contextmanager
@@ -142,7 +146,7 @@ def main() -> None:
                                ('from d = 1000, mu_C = 0.35', far)):
             run(f'{where}: one start (--quick), a thread per core',
                 {**content, 'starts': 1, 'workers': 0}, folder)
-            run(f'{where}: the defaults (8 starts on a process per core)', content, folder)
+            run(f'{where}: the defaults (auto starts on a process per core)', content, folder)
 
 
 if __name__ == '__main__':

@@ -259,7 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="tracks (CSV) or a recording (RUN.mcap) instead of the fit file's")
     fit.add_argument('--quick', action='store_true',
                      help="one start (the fit file's values) instead of the fit file's "
-                          'starts (8 by default)')
+                          'starts (auto by default: batches of 8 until 3 reach the lowest '
+                          'cost)')
     fit.add_argument('--scheduler', metavar='ADDRESS',
                      help="run the fit's simulations on a running Dask scheduler "
                           "(tcp://host:port), the sweep's cluster; default: this process")
@@ -449,6 +450,9 @@ def cmd_fit(args: argparse.Namespace, err: TextIO) -> int:
                   f'(threshold {test.threshold:.4g}): {"passed" if test.passed else "FAILED"}; '
                   f'{result.reached_best} of {len(result.start_costs)} starts reached the '
                   'lowest cost\n')
+    for restart in result.restarts:
+        err.write(f'restarted from the better point {restart.found_by} found: cost '
+                  f'{restart.from_cost + restart.profile_cost:.4g} -> {restart.to_cost:.4g}\n')
     for warning in result.warnings:
         err.write(f'warning: {warning}\n')
     windows = (f' and {result.window_simulations} window simulations'

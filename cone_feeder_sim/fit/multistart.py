@@ -45,11 +45,16 @@ DIFF_STEP = 1.0e-3
 STARTS_SEED = 0
 
 
-def start_points(count: int, lb: np.ndarray, ub: np.ndarray) -> list[np.ndarray]:
-    """Return ``count`` seeded Latin-hypercube points (n,) in the box [lb, ub] (θ)."""
+def start_points(count: int, lb: np.ndarray, ub: np.ndarray,
+                 batch: int = 0) -> list[np.ndarray]:
+    """
+    Return ``count`` seeded Latin-hypercube points (n,) in the box [lb, ub] (θ).
+
+    batch: the batch of starts (0 the first); each batch is a hypercube of its own seed.
+    """
     if count <= 0:
         return []
-    sample = qmc.LatinHypercube(d=len(lb), seed=STARTS_SEED).random(count)
+    sample = qmc.LatinHypercube(d=len(lb), seed=STARTS_SEED + batch).random(count)
     return list(qmc.scale(sample, lb, ub))
 
 

@@ -95,7 +95,9 @@ class ProfileSide:
     end: θ_k where ΔC reaches the threshold, or the bound; flat: it did not reach the
     threshold before the bound (or in MAX_POINTS points): not identifiable that way, and
     the interval reaches the bound; lower: the lowest ΔC found (< 0: the
-    profile found a better fit than the optimum); simulations: the runs it took.
+    profile found a better fit than the optimum) and better: the whole θ (n,) of that point
+    where it is below 0 (a start for the fit to restart from), else None; simulations: the
+    runs it took.
     """
 
     thetas: list[float] = field(default_factory=list)
@@ -103,6 +105,7 @@ class ProfileSide:
     end: float = math.nan
     flat: bool = False
     lower: float = 0.0
+    better: tuple[float, ...] | None = None
     simulations: int = 0
 
 
@@ -172,7 +175,7 @@ def profile_side(job: ProfileJob) -> ProfileSide:
         deltas.append(delta)
         if abs(delta - job.threshold) <= CLOSE * job.threshold:
             end = trial * root / math.sqrt(delta)
-            return _side(job, distances, deltas, job.theta[k] + sign * end, False, runs[0])
+            return _side(job, distances, deltas, job.theta[k] + sign * end, False, runs[0], warm)
         if delta >= job.threshold:
             above = (trial, math.sqrt(delta))
             break
@@ -183,7 +186,7 @@ def profile_side(job: ProfileJob) -> ProfileSide:
         trial = min(max(guess, 1.5 * trial), 4.0 * trial, limit)
     if above is None:  # below the threshold up to the bound (or as far as it walked)
         return _side(job, distances, deltas, job.ub[k] if sign > 0 else job.lb[k], True,
-                     runs[0])
+                     runs[0], warm)
     for _ in range(MAX_REFINE):
         width = above[0] - below[0]
         cross = below[0] + (root - below[1]) * width / (above[1] - below[1])
@@ -196,19 +199,22 @@ def profile_side(job: ProfileJob) -> ProfileSide:
         distances.append(cross)
         deltas.append(delta)
         if abs(delta - job.threshold) <= BRACKET * job.threshold:
-            return _side(job, distances, deltas, job.theta[k] + sign * cross, False, runs[0])
+            return _side(job, distances, deltas, job.theta[k] + sign * cross, False, runs[0], warm)
         if delta >= job.threshold:
             above = (cross, math.sqrt(delta))
         else:
             below = (cross, math.sqrt(max(delta, 0.0)))
     cross = below[0] + (root - below[1]) * (above[0] - below[0]) / (above[1] - below[1])
-    return _side(job, distances, deltas, job.theta[k] + sign * cross, False, runs[0])
+    return _side(job, distances, deltas, job.theta[k] + sign * cross, False, runs[0], warm)
 
 
 def _side(job: ProfileJob, distances: list[float], deltas: list[float], end: float,
-          flat: bool, simulations: int) -> ProfileSide:
+          flat: bool, simulations: int, warm: dict[float, np.ndarray]) -> ProfileSide:
     order = np.argsort(distances)
     thetas = [float(job.theta[job.key] + job.direction * distances[i]) for i in order]
+    lowest = int(np.argmin(deltas)) if deltas else -1
+    better = (tuple(float(v) for v in warm[distances[lowest]])
+              if lowest >= 0 and deltas[lowest] < 0.0 else None)
     return ProfileSide(thetas=thetas, deltas=[float(deltas[i]) for i in order], end=float(end),
-                       flat=flat, lower=float(min(deltas, default=0.0)),
+                       flat=flat, lower=float(min(deltas, default=0.0)), better=better,
                        simulations=simulations)

@@ -17,8 +17,9 @@ A fit: multistart least squares, a test of fit, profile-likelihood intervals, wa
 
 The search scale is θ: log p for a parameter whose range is positive, p otherwise.
 
-1. **Starts.** The file's start values and ``starts - 1`` seeded Latin-hypercube points of
-   the box (:mod:`multistart`; 8 starts by default, ``starts: 1`` or ``--quick`` for one).
+1. **Starts.** The file's start values and seeded Latin-hypercube points of the box
+   (:mod:`multistart`): by default (``starts: auto``) in batches of 8 until 3 starts reach
+   the lowest cost, 32 at most; ``starts: N`` for N in all, ``--quick`` for one.
    With ``method: global``, differential evolution replaces the file's start by the best
    point it finds; with ``segments``, a multiple-shooting fit (:mod:`shooting`) from that
    start is one more start. Each start is a bounded least-squares fit (trust-region
@@ -37,6 +38,11 @@ The search scale is θ: log p for a parameter whose range is positive, p otherwi
    2 ΔC / sigma² = chi^2_1(0.95). A fit that failed its test gets no intervals: its low
    and high are the free range, and ``interval`` says so.
    A profile flat to a bound names the key as not identifiable that way.
+4. **Restarts.** A profile point whose cost is below the optimum's by more than
+   :data:`RESTART_CHI2` in 2 ΔC / sigma² shows that the local fit stopped short of the
+   minimum: the fit restarts least squares from the lowest such point, takes what it
+   reaches as the optimum, and tests and profiles again, :data:`MAX_RESTARTS` times at
+   most; only then does it warn and fail. ``restarts`` records each.
 
 Standard errors and correlations come from s² (JᵀJ)⁻¹ at the optimum (s² = |r|² / (m - n),
 the delta method to p). Warnings also name keys where the Jacobian is near-singular
@@ -53,6 +59,7 @@ from functools import partial
 import math
 import multiprocessing
 import os
+import time
 from typing import Any
 
 import numba
@@ -67,6 +74,7 @@ from .noise import Noise, noise_of
 from .problem import FitProblem, Residuals, SumOfSquares
 from .profiles import DELTA_CHI2, Profile, profile_side, ProfileJob, ProfileSide
 from .shooting import initial_starts, Shooting, split
+from .spec import AUTO_BATCH, AUTO_ENOUGH, AUTO_MAX
 
 __all__ = ['CONDITION_LIMIT', 'CORRELATION_LIMIT', 'dask_mapper', 'fit', 'FitResult',
            'INTERVAL_SHARE']
@@ -80,6 +88,28 @@ CORRELATION_LIMIT = 0.95
 INTERVAL_SHARE = 0.25
 #: The first step of a profile where the Jacobian gives none (a share of the range in θ).
 PROFILE_STEP = 0.05
+#: A profile point below the optimum by more than this in 2 ΔC / sigma² (the cost's own
+#: roughness: the simulator's adaptive steps) makes the fit restart from it...
+RESTART_CHI2 = 1.0
+#: ... this many times at most; then the fit warns and fails.
+MAX_RESTARTS = 3
+
+
+@dataclass(frozen=True)
+class Restart:
+    """
+    A restart of the local fit from a better point a profile found.
+
+    found_by: which profile; start: the point (p, the keys' values); from_cost: the
+    optimum's cost before, profile_cost: that point's ΔC below it; to_cost: the cost the
+    restarted fit reached (½ Σ r²).
+    """
+
+    found_by: str
+    start: np.ndarray
+    from_cost: float
+    profile_cost: float
+    to_cost: float
 
 
 @dataclass
@@ -93,7 +123,10 @@ class FitResult:
     fit passed its test; message: least_squares'. low, high: the profile-likelihood
     interval (``interval`` names the method); profiles per key; start_costs: every start's
     final cost, lowest first (the waterfall); reached_best: how many reached the lowest;
-    fit_test: the test of fit; flat: per key, (low side, high side) flat to the bound.
+    fit_test: the test of fit; flat: per key, (low side, high side) flat to the bound;
+    restarts: the restarts from better points the profiles found; stages: where the time
+    went, per stage that ran (global, segments, starts, profiles, restarts): (simulations,
+    wall seconds).
     """
 
     keys: tuple[str, ...]
@@ -115,6 +148,8 @@ class FitResult:
     start_costs: list[float] = field(default_factory=list)
     reached_best: int = 1
     fit_test: FitTest | None = None
+    restarts: list[Restart] = field(default_factory=list)
+    stages: dict[str, tuple[int, float]] = field(default_factory=dict)
 
     def as_mapping(self) -> dict[str, Any]:
         """Return the result as RESULT.yaml holds it (plain numbers)."""
@@ -139,7 +174,13 @@ class FitResult:
             'test_of_fit': self.fit_test.as_mapping() if self.fit_test else None,
             'starts': {'count': len(self.start_costs), 'reached_best': int(self.reached_best),
                        'costs': [float(c) for c in self.start_costs]},
+            'restarts': [{'found_by': r.found_by,
+                          'from': {k: float(v) for k, v in zip(self.keys, r.start)},
+                          'from_cost': float(r.from_cost + r.profile_cost),
+                          'to_cost': float(r.to_cost)} for r in self.restarts],
             'simulations': int(self.simulations),
+            'stages': {name: {'simulations': int(n), 'seconds': round(float(t), 3)}
+                       for name, (n, t) in self.stages.items()},
             'window_simulations': int(self.window_simulations),
             'piece_rms': {int(p): float(v) for p, v in self.piece_rms.items()},
             'warnings': list(self.warnings),
@@ -164,11 +205,14 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
     to_theta = np.where(column, np.log(np.where(column, bounds, 1.0)), bounds)
     lb, ub = to_theta[:, 0], to_theta[:, 1]
     task = Residuals(spec, tuple(bool(v) for v in logs))
+    noise = (noise_of(spec.noise, spec.tracks) if spec.exits is None
+             else Noise(sigma=1.0, source='exit_sigma'))
 
     def theta_of(p: np.ndarray) -> np.ndarray:
         return np.where(logs, np.log(np.where(logs, p, 1.0)), p)
 
     workers = spec.workers or os.cpu_count() or 1
+    stages = _Stages(problem)
     with ThreadPoolExecutor(workers) as pool, _jobs(mapper, spec.processes) as run:
         batch = mapper or (pool.map if workers > 1 else map)
 
@@ -179,35 +223,48 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
 
         first = np.clip(theta_of(np.array(spec.start)), lb, ub)
         if spec.method == 'global':
-            first = _global_search(problem, task, lb, ub, counted)
+            with stages.stage('global'):
+                first = _global_search(problem, task, lb, ub, counted)
         starts = [first]
         if spec.segments is not None:  # its estimate, and where it started: the best wins
-            starts.insert(0, _multiple_shooting(problem, task.values, first, lb, ub, batch))
-        starts += start_points(spec.starts - 1, lb, ub)
-        jobs = [LocalJob(task, theta0, lb, ub, spec.loss) for theta0 in starts]
-        if len(jobs) == 1:
-            outcomes = [local_fit(jobs[0], batch)]
-        else:
-            outcomes = run(local_fit, jobs)
-        problem.count(sum(o.simulations for o in outcomes))
-        best = min(outcomes, key=lambda o: o.cost)
-        noise = (noise_of(spec.noise, spec.tracks) if spec.exits is None
-                 else Noise(sigma=1.0, source='exit_sigma'))
-        estimate = task.values(best.x)
-        owners = problem.owners(estimate)
-        result = _statistics(problem, best, estimate, logs, owners)
-        result.start_costs = sorted(o.cost for o in outcomes)
-        result.reached_best = int(same_minimum(np.array(result.start_costs), noise.sigma,
-                                               len(spec.keys)).sum())
-        test = goodness_of_fit(best.fun, owners, noise, len(spec.keys))
-        result.fit_test = test
-        sides = []
-        if test.passed and spec.profiles:
-            sides = run(profile_side, _profile_jobs(task, best, lb, ub, noise.sigma ** 2))
-            problem.count(sum(side.simulations for side in sides))
+            with stages.stage('segments'):
+                starts.insert(0, _multiple_shooting(problem, task.values, first, lb, ub,
+                                                    batch))
+        with stages.stage('starts'):
+            outcomes = _starts(problem, task, starts, lb, ub, noise, run, batch)
+        restarts: list[Restart] = []
+        while True:
+            best = min(outcomes, key=lambda o: o.cost)
+            estimate = task.values(best.x)
+            owners = problem.owners(estimate)
+            result = _statistics(problem, best, estimate, logs, owners)
+            test = goodness_of_fit(best.fun, owners, noise, len(spec.keys))
+            sides = []
+            if test.passed and spec.profiles:
+                with stages.stage('profiles'):
+                    sides = run(profile_side,
+                                _profile_jobs(task, best, lb, ub, noise.sigma ** 2))
+                    problem.count(sum(side.simulations for side in sides))
+            better = _better_point(sides, spec.keys, noise.sigma ** 2)
+            if better is None or len(restarts) >= MAX_RESTARTS:
+                break
+            found_by, theta, from_cost = better
+            with stages.stage('restarts'):
+                outcome = local_fit(LocalJob(task, np.array(theta), lb, ub, spec.loss), batch)
+                problem.count(outcome.simulations)
+            restarts.append(Restart(found_by=found_by, start=task.values(np.array(theta)),
+                                    from_cost=best.cost, profile_cost=from_cost,
+                                    to_cost=outcome.cost))
+            outcomes.append(outcome)
+    result.start_costs = sorted(o.cost for o in outcomes[:len(outcomes) - len(restarts)])
+    result.reached_best = int(same_minimum(np.array(result.start_costs + [best.cost]),
+                                           noise.sigma, len(spec.keys))[:-1].sum())
+    result.fit_test = test
+    result.restarts = restarts
+    result.stages = stages.spent
     result.simulations = problem.simulations
     if test.passed and spec.profiles:
-        _intervals(result, spec.keys, logs, lb, ub, sides, noise)
+        _intervals(result, spec.keys, logs, lb, ub, sides, noise, len(restarts))
     elif test.passed:
         result.interval = ('Jacobian, 95 % (estimate ± 1.96 standard errors in the search '
                            'scale; profiles: false)')
@@ -216,10 +273,74 @@ def fit(problem: FitProblem, mapper: Mapper | None = None) -> FitResult:
         result.interval = ('not estimated: the fit failed its test (low and high are the '
                            'free range)')
     _test_warnings(result, test, noise)
-    if len(outcomes) > 1 and result.reached_best == 1:
-        result.warnings.append(f'only 1 of {len(outcomes)} starts reached the lowest cost: '
-                               'the minimum may have a narrow basin; more starts would tell')
+    if len(result.start_costs) > 1 and result.reached_best == 1:
+        result.warnings.append(
+            f'only 1 of {len(result.start_costs)} starts reached the lowest cost: the minimum '
+            'may have a narrow basin; more starts would tell')
     return result
+
+
+class _Stages:
+    """The simulations and wall time (s) of each stage of a fit, summed over its runs."""
+
+    def __init__(self, problem: FitProblem) -> None:
+        self.problem = problem
+        self.spent: dict[str, tuple[int, float]] = {}
+
+    @contextlib.contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        """Add what runs inside to the stage ``name``."""
+        simulations, start = self.problem.simulations, time.perf_counter()
+        yield
+        count, seconds = self.spent.get(name, (0, 0.0))
+        self.spent[name] = (count + self.problem.simulations - simulations,
+                            seconds + time.perf_counter() - start)
+
+
+def _starts(problem: FitProblem, task: Residuals, first: list[np.ndarray], lb: np.ndarray,
+            ub: np.ndarray, noise: Noise, run: Callable[..., list[Any]],
+            batch: Mapper) -> list[LocalOutcome]:
+    """
+    Run the local fits from ``first`` and the seeded points; return their outcomes.
+
+    ``starts: N``: N starts in all. ``starts: auto``: batches of AUTO_BATCH (the first with
+    ``first``) until AUTO_ENOUGH starts reached the lowest cost, AUTO_MAX at most.
+    """
+    spec = problem.spec
+    count = spec.starts if spec.starts is not None else AUTO_BATCH
+    points = first + start_points(count - len(first) + (spec.segments is not None), lb, ub)
+    outcomes: list[LocalOutcome] = []
+    number = 0
+    while True:
+        jobs = [LocalJob(task, theta0, lb, ub, spec.loss) for theta0 in points]
+        outcomes += ([local_fit(jobs[0], batch)] if len(jobs) == 1 else run(local_fit, jobs))
+        problem.count(sum(o.simulations for o in outcomes[-len(jobs):]))
+        if spec.starts is not None or len(outcomes) >= AUTO_MAX:
+            return outcomes
+        costs = np.array([o.cost for o in outcomes])
+        if same_minimum(costs, noise.sigma, len(spec.keys)).sum() >= AUTO_ENOUGH:
+            return outcomes
+        number += 1
+        points = start_points(min(AUTO_BATCH, AUTO_MAX - len(outcomes)), lb, ub, number)
+
+
+def _better_point(sides: list[ProfileSide], keys: tuple[str, ...],
+                  variance: float) -> tuple[str, tuple[float, ...], float] | None:
+    """
+    Return where a profile found the lowest cost below the optimum's, or None.
+
+    Below by more than RESTART_CHI2 in 2 ΔC / sigma² (the cost's roughness): (which
+    profile found it, its θ, its ΔC).
+    """
+    found = [(side.lower, k) for k, side in enumerate(sides)
+             if side.better is not None and 2.0 * side.lower / variance < -RESTART_CHI2]
+    if not found:
+        return None
+    lower, k = min(found)
+    side = sides[k]
+    assert side.better is not None
+    return (f'the profile of {keys[k // 2]} ({"lower" if k % 2 == 0 else "upper"} side)',
+            side.better, lower)
 
 
 @contextlib.contextmanager
@@ -280,7 +401,8 @@ def _profile_jobs(task: Residuals, best: LocalOutcome, lb: np.ndarray, ub: np.nd
 
 
 def _intervals(result: FitResult, keys: tuple[str, ...], logs: np.ndarray, lb: np.ndarray,
-               ub: np.ndarray, sides: list[ProfileSide], noise: Noise) -> None:
+               ub: np.ndarray, sides: list[ProfileSide], noise: Noise,
+               restarts: int) -> None:
     """Put the profiles' intervals, points and flat sides into ``result``; warn."""
     for k, key in enumerate(keys):
         value = partial(_value_of, bool(logs[k]))
@@ -300,12 +422,13 @@ def _intervals(result: FitResult, keys: tuple[str, ...], logs: np.ndarray, lb: n
                     f'{key}: its profile stays below the 95 % threshold up to the {name} '
                     f'bound {float(value(bound)):.4g}: not identifiable that way')
         lowest = min(down.lower, up.lower)
-        if 2.0 * lowest / variance < -1.0:
+        if 2.0 * lowest / variance < -RESTART_CHI2:  # after MAX_RESTARTS restarts
             result.success = False
             result.warnings.append(
                 f"{key}: its profile found a cost lower than the optimum's (Δχ² = "
-                f'{2.0 * lowest / variance:.3g}): the fit did not reach the minimum; try '
-                'more starts')
+                f'{2.0 * lowest / variance:.3g}) after {restarts} restarts from such points, '
+                'the most the fit takes: the fit did not reach the minimum; try more starts '
+                'or segments')
         if (not profile.flat_low and not profile.flat_high
                 and profile.high - profile.low > INTERVAL_SHARE * (ub[k] - lb[k])):
             result.warnings.append(

@@ -29,7 +29,8 @@ A fit file is a YAML mapping::
     exit_sigma: {angle_deg: 1.0, t: 0.02}   # exits: the uncertainty of an angle and a time
     segments: 0.5            # optional: multiple shooting over windows of 0.5 s first
     loss: linear             # or soft_l1, huber, cauchy, arctan (scipy's robust losses)
-    starts: 8                # the start values and starts - 1 seeded points in the bounds
+    starts: auto             # batches of 8 starts (the start values and seeded points in the
+                             # bounds) until 3 reach the lowest cost, 32 at most; or a count
     noise: 0.001             # optional: the tracks' noise sigma (m); estimated if absent
     processes: 0             # processes for the starts and profiles (0: one per numba thread)
     profiles: true           # false: intervals from the Jacobian (±1.96 sigma), no profiles
@@ -65,8 +66,12 @@ __all__ = ['FitSpec', 'fit_from_mapping', 'load_fit', 'LOSSES', 'RESIDUALS']
 
 FIT_KEYS = ('scenario', 'tracks', 'tracks_every', 'free', 'residual', 'exit_sigma', 'segments',
             'loss', 'starts', 'method', 'global', 'workers', 'noise', 'processes', 'profiles')
-#: Starts of a fit by default (multistart: doc/fit.md measured what one start misses).
-DEFAULT_STARTS = 8
+#: ``starts: auto`` (the default): starts run in batches of AUTO_BATCH (the first holds the
+#: file's start values) until AUTO_ENOUGH reached the lowest cost, AUTO_MAX at most
+#: (multistart: doc/fit.md measured what one start misses).
+AUTO_BATCH = 8
+AUTO_ENOUGH = 3
+AUTO_MAX = 32
 #: The searches: least squares from the start values, or differential evolution first.
 METHODS = ('local', 'global')
 #: The keys of ``global:`` and their defaults.
@@ -89,7 +94,8 @@ class FitSpec:
     A validated fit: the base scenario mapping and its directory, the tracks, the free keys.
 
     keys: the free dotted keys; bounds (low, high) and start value of each; residual,
-    segments (s, or None: single shooting only), loss, starts, method, global_options
+    segments (s, or None: single shooting only), loss, starts (None: auto), method,
+    global_options
     (popsize, maxiter, seed), workers, processes, profiles as in the file; noise (m, or
     None: estimated from the tracks). With ``residual: exits``, exits holds
     the observed exits, exit_sigma their uncertainty (deg, s), and tracks is empty.
@@ -106,7 +112,7 @@ class FitSpec:
     exit_sigma: tuple[float, float] = (1.0, 0.02)
     segments: float | None = None
     loss: str = 'linear'
-    starts: int = DEFAULT_STARTS
+    starts: int | None = None
     method: str = 'local'
     global_options: tuple[tuple[str, int], ...] = tuple(GLOBAL_DEFAULTS.items())
     workers: int = 1
@@ -245,9 +251,11 @@ def fit_from_mapping(content: Any, base_dir: Path | None = None) -> FitSpec:
     loss = content.get('loss', 'linear')
     if loss not in LOSSES:
         raise ScenarioError(f'loss must be one of {", ".join(LOSSES)}, got {loss!r}')
-    starts = content.get('starts', DEFAULT_STARTS)
-    if isinstance(starts, bool) or not isinstance(starts, int) or not 1 <= starts <= 100:
-        raise ScenarioError(f'starts must be an integer in [1, 100], got {starts!r}')
+    starts = content.get('starts', 'auto')
+    if starts == 'auto':
+        starts = None
+    elif isinstance(starts, bool) or not isinstance(starts, int) or not 1 <= starts <= 100:
+        raise ScenarioError(f'starts must be auto or an integer in [1, 100], got {starts!r}')
     method = content.get('method', 'local')
     if method not in METHODS:
         raise ScenarioError(f'method must be one of {", ".join(METHODS)}, got {method!r}')

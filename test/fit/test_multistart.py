@@ -45,14 +45,14 @@ def test_starts_inside_the_best_ones_confidence_region_reached_it() -> None:
 @pytest.mark.slow
 def test_the_default_starts_find_the_valley_one_start_misses(tmp_path: Path) -> None:
     # three pieces over 2 s, started far off (d = 20, mu_C = 0.95): one start stops in
-    # another valley, and the test of fit says so; the defaults (8 starts) find the truth
+    # another valley, and the test of fit says so; the defaults (auto starts) find the truth
     content = far_start(tmp_path)
     one = fit(FitProblem(fit_from_mapping({**content, 'starts': 1, 'processes': 1}, tmp_path)))
     assert abs(one.estimate[0] - 315.0) > 50.0 and not one.success
     assert one.warnings[0].startswith('the fit fails its test')
     result = fit(FitProblem(fit_from_mapping(content, tmp_path)))
     assert result.success, result.warnings
-    assert len(result.start_costs) == 8 and result.reached_best >= 2
+    assert len(result.start_costs) >= 8 and result.reached_best >= 3  # auto: 3 at the best
     assert result.start_costs[-1] > result.start_costs[0]  # some starts ended elsewhere
     for value, low, high in zip((315.0, 0.7225), result.low, result.high):
         assert low < value < high
