@@ -19,8 +19,9 @@ The island coupling solves each step with every piece's own Jacobian block only,
 leaves the pair forces out of the linear solves. A W-method (ROS34PW2) keeps its order
 whatever the Jacobian; RODAS4 (the pieces' own method) does not. A crowd of 12 touching
 pieces (nine resting near the rim, three dropped on them) on a cone reversing in 0.5 s is
-run for 0.4 s with each method at the default tolerances and 10x and 100x tighter, and
-compared with the exact coupling at 1e-4 of the defaults' tolerances (the reference).
+run for 0.3 s with each method at the default tolerances and 10x tighter, and compared
+with the exact coupling at 1e-2 of the defaults' tolerances (the reference; 1e-4 did not
+finish in 30 minutes).
 Printed: the largest position error, the integration steps per particle-second and the
 CPU time::
 
@@ -49,7 +50,7 @@ def crowd(model: ModelParams) -> np.ndarray:
 
 
 def run(coupling: str, scale: float) -> tuple[np.ndarray, int, float]:
-    """Return the positions after 0.4 s (12, 3), the steps and the CPU seconds."""
+    """Return the positions after 0.3 s (12, 3), the steps and the CPU seconds."""
     model = ModelParams(interactions=InteractionParams(enabled=True, coupling=coupling))
     base = SolverParams()
     solver = replace(base, rtol=base.rtol * scale, atol_position=base.atol_position * scale,
@@ -59,7 +60,7 @@ def run(coupling: str, scale: float) -> tuple[np.ndarray, int, float]:
     sim.add(crowd(model))
     steps = 0
     cpu = time.process_time()
-    for k in range(1, 21):
+    for k in range(1, 16):
         result = sim.advance_to(0.02 * k)
         steps += result.stats.accepted + result.stats.rejected
     q = np.full((12, 3), np.nan)
@@ -71,19 +72,19 @@ def main() -> None:
     """Print each method's error and cost at three tolerances."""
     print(calibration_line())
     run('island', 1.0)  # load the kernels
-    reference, _, _ = run('exact', 1e-4)
+    reference, _, _ = run('exact', 1e-2)
     print(f'{"method":>24} {"tolerances":>10} {"max error (m)":>14} {"steps/p-s":>10} '
           f'{"CPU s":>7}')
     for method in (ROS34PW2, RODAS4_BLOCK):
         simulation.ISLAND_METHOD = method
-        for scale in (1.0, 0.1, 0.01):
+        for scale in (1.0, 0.1):
             q, steps, cpu = run('island', scale)
             print(f'{method.name:>24} {scale:>10g} {np.nanmax(np.abs(q - reference)):>14.3e} '
-                  f'{steps / (12 * 0.4):>10.0f} {cpu:>7.2f}')
+                  f'{steps / (12 * 0.3):>10.0f} {cpu:>7.2f}', flush=True)
     simulation.ISLAND_METHOD = ROS34PW2
     q, steps, cpu = run('exact', 1.0)
     print(f'{"exact coupling":>24} {1.0:>10g} {np.nanmax(np.abs(q - reference)):>14.3e} '
-          f'{steps / (12 * 0.4):>10.0f} {cpu:>7.2f}')
+          f'{steps / (12 * 0.3):>10.0f} {cpu:>7.2f}', flush=True)
 
 
 if __name__ == '__main__':
