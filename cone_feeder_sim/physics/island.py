@@ -280,6 +280,20 @@ def step_errors(err, errh, y0, y1, h1, members, lpairs, active, products, inter,
 
 
 @jit
+def combine_stages(base, u, m_tab, e_tab, out, err):
+    """Write the step's end out = base + sum_i m_i u_i and its error err = sum_i e_i u_i (k, w)."""
+    for p in range(base.shape[0]):
+        for a in range(base.shape[1]):
+            acc = base[p, a]
+            e = 0.0
+            for i in range(u.shape[0]):
+                acc += m_tab[i] * u[i, p, a]
+                e += e_tab[i] * u[i, p, a]
+            out[p, a] = acc
+            err[p, a] = e
+
+
+@jit
 def w_step(y0, hist0, f0, fh0, ft, h, omega0, domega, members, lpairs, active, products,
            inter, machine, ext, ext_rate, jac, lu, piv, u, uh, ys, hs, fs, fhs, y1, h1, err,
            errh, a_tab, c_tab, times, d_tab, m_tab, e_tab, gamma):
@@ -339,24 +353,8 @@ def w_step(y0, hist0, f0, fh0, ft, h, omega0, domega, members, lpairs, active, p
                 for j in range(i):
                     acc += c_tab[i, j] * inv_h * uh[j, q, a]
                 uh[i, q, a] = acc / alpha
-    for p in range(n):
-        for a in range(STATE_SIZE):
-            acc = y0[p, a]
-            e = 0.0
-            for i in range(s):
-                acc += m_tab[i] * u[i, p, a]
-                e += e_tab[i] * u[i, p, a]
-            y1[p, a] = acc
-            err[p, a] = e
-    for q in range(m):
-        for a in range(3):
-            acc = hist0[q, a]
-            e = 0.0
-            for i in range(s):
-                acc += m_tab[i] * uh[i, q, a]
-                e += e_tab[i] * uh[i, q, a]
-            h1[q, a] = acc
-            errh[q, a] = e
+    combine_stages(y0, u, m_tab, e_tab, y1, err)
+    combine_stages(hist0, uh, m_tab, e_tab, h1, errh)
     for p in range(n):
         if active[p]:
             for a in range(STATE_SIZE):
