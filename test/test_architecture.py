@@ -30,8 +30,8 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / 'cone_feeder_sim'
 #: Rank of each room; physics and weigher, ros, report and sweep are side by side.
 RANK = {'errors': 0, '__init__': 0, 'physics': 1, 'weigher': 1, 'feeder': 2, 'formats': 3,
-        'view': 3, 'report': 4, 'sweep': 4, 'rl': 4, 'fit': 4, 'ros': 5, 'cli': 5}
-SIDE_BY_SIDE = ('report', 'sweep', 'rl', 'fit')
+        'view': 3, 'report': 4, 'sweep': 4, 'rl': 4, 'fit': 4, 'twin': 4, 'ros': 5, 'cli': 5}
+SIDE_BY_SIDE = ('report', 'sweep', 'rl', 'fit', 'twin')
 #: Rooms that must not import each other although one ranks after the other.
 APART = {('ros', 'report'), ('ros', 'sweep'), ('ros', 'fit'), ('cli', 'ros')}
 #: The optional dependency of the sweep: imported by its Dask modules only.

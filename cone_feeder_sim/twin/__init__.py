@@ -1,0 +1,23 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+The digital twin of a running feeder (issue 39, in progress): detections in, forecasts out.
+
+Built so far, each with its checks: ``enkf`` (the ensemble Kalman filter's analysis of an
+ensemble of states against observed positions, with the normalised innovation squared) and
+``association`` (detections to the twin's pieces: a chi-square gate, then an optimal
+assignment). Still to come: the ensemble of engines as the forecast model, births and
+deaths, late detections re-run from their stamp, the channel forecasts, the headless
+``cone-feeder-sim twin`` and ``twin_node``. No ROS here.
+"""
