@@ -14,10 +14,11 @@
 """
 The digital twin of a running feeder (issue 39, in progress): detections in, forecasts out.
 
-Built so far, each with its checks: ``enkf`` (the ensemble Kalman filter's analysis of an
-ensemble of states against observed positions, with the normalised innovation squared) and
-``association`` (detections to the twin's pieces: a chi-square gate, then an optimal
-assignment). Still to come: the ensemble of engines as the forecast model, births and
-deaths, late detections re-run from their stamp, the channel forecasts, the headless
+Built so far, each with its checks (doc/twin.md): ``enkf`` (the ensemble Kalman filter's
+analysis of an ensemble of states against observed positions, with the normalised innovation
+squared), ``association`` (detections to the twin's pieces: a chi-square gate, then an
+optimal assignment) and ``estimator`` (``Twin``: an ensemble of the physics core's states
+following detections, births, deaths and exits, d and mu_C as augmented state). Still to
+come: late detections re-run from their stamp, the channel forecasts, the headless
 ``cone-feeder-sim twin`` and ``twin_node``. No ROS here.
 """

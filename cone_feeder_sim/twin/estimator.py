@@ -1,0 +1,296 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+The twin's estimator: an ensemble of simulations kept in step with detections.
+
+Each of M members is a state of the physics core (:class:`~..physics.simulation.SimState`),
+all with the same pieces (the same ids), each with its own product parameters d and mu_C
+(one value each for the product on the cone: the augmented state). The forecast is the
+physics core's own :func:`~..physics.simulation.advance_many` (the engine's integrator, all
+members in one compiled call), under the cone speed measured so far. At a frame of
+detections the estimator
+
+1. associates the detections with its pieces (:mod:`.association`: the ensemble's mean and
+   spread of each piece's position plus the detection noise, a chi-square gate, the
+   optimal assignment);
+2. analyses the ensemble (:mod:`.enkf`) against the assigned detections: every piece's
+   whole state (position, velocity, filter force, in cone axes) and log d and mu_C, through
+   the covariances the ensemble carries, so that the parameters are re-identified on line;
+3. adds a piece for each detection left over (a birth: resting on the cone where it was
+   seen, spread by the detection noise over the members) and drops pieces not seen for
+   ``death_after`` s (deaths) and pieces that left the cone in most members (exits).
+
+Detections are world-frame positions; the cone axes turn with the cone by the angle all
+members share, so a detection is turned into cone axes before the analysis (the noise is
+isotropic in x, y, so its covariance does not change).
+"""
+
+from dataclasses import dataclass, replace
+import math
+
+import numpy as np
+
+from .association import associate
+from .enkf import analyse
+from ..physics.model import STATE_SIZE
+from ..physics.params import product_row, ProductParams
+from ..physics.rotation import rotate_z, RotationProfile
+from ..physics.simulation import (
+    add_particles, advance_many, remove_particles, resting_height, SimParams, SimState,
+    world_from_cone)
+
+__all__ = ['Frame', 'Twin', 'TwinSettings']
+
+#: The ranges the members' parameters are held in: log d (d in N*s/m) and mu_C.
+LOG_D_RANGE = (math.log(1.0), math.log(1.0e4))
+MU_C_RANGE = (0.05, 5.0)
+
+
+@dataclass(frozen=True)
+class TwinSettings:
+    """
+    The estimator's settings.
+
+    members: ensemble size M; sigma: the detections' noise (m, each of x, y); d and
+    d_spread: the prior of d (N*s/m) and its relative spread (log scale); mu_C and
+    mu_C_spread: its prior and spread; drift: the parameters' random walk per second
+    (relative for d, absolute for mu_C), so that they stay identifiable when the product
+    changes; inflation: the members' deviations from their mean (the pieces' states only)
+    are multiplied by this before each analysis (multiplicative inflation, Anderson &
+    Anderson 1999: a finite ensemble underestimates its spread); death_after: a piece
+    not seen for this long (s) is dropped; seed: the ensemble's and the perturbations' seed.
+    """
+
+    members: int = 32
+    sigma: float = 0.002
+    d: float = 225.0
+    d_spread: float = 0.5
+    mu_C: float = 0.85
+    mu_C_spread: float = 0.05
+    drift: float = 0.01
+    inflation: float = 1.1
+    death_after: float = 1.0
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Frame:
+    """
+    What one frame of detections did.
+
+    t (s); associated, births, deaths, exits: counts; nis: the analysis's normalised
+    innovation squared and observed: its degrees of freedom (2 per associated piece).
+    """
+
+    t: float
+    associated: int
+    births: int
+    deaths: int
+    exits: int
+    nis: float
+    observed: int
+
+
+class Twin:
+    """An ensemble of simulations that follows detected pieces (see the module)."""
+
+    def __init__(self, params: SimParams, settings: TwinSettings = TwinSettings(),
+                 t0: float = 0.0) -> None:
+        if settings.members < 2:
+            raise ValueError(f'members must be at least 2, got {settings.members}')
+        self.params, self.settings = params, settings
+        self.rng = np.random.default_rng(settings.seed)
+        m = settings.members
+        self.log_d = math.log(settings.d) + settings.d_spread * self.rng.standard_normal(m)
+        self.mu_c = settings.mu_C + settings.mu_C_spread * self.rng.standard_normal(m)
+        self.states = [SimState(t=t0) for _ in range(m)]
+        self.times, self.omegas = [t0], [0.0]
+        self.masses: dict[int, float] = {}
+        self.last_seen: dict[int, float] = {}
+        self._exits: list[int] = []
+        self._drifted = t0
+
+    @property
+    def t(self) -> float:
+        """Return the twin's time (s)."""
+        return self.states[0].t
+
+    def profile(self) -> RotationProfile:
+        """Return the cone speed measured so far (held after the last measurement)."""
+        return RotationProfile(np.array(self.times), np.array(self.omegas))
+
+    def cone_speed(self, t: float, omega: float) -> None:
+        """Take a measured cone speed (rad/s) at t (s), not before the last one."""
+        if not math.isfinite(omega) or t < self.times[-1]:
+            raise ValueError(f'cone speed {omega} at t = {t} s: not finite or out of order')
+        if t == self.times[-1]:
+            self.omegas[-1] = float(omega)
+        else:
+            self.times.append(float(t))
+            self.omegas.append(float(omega))
+
+    def predict(self, t1: float) -> None:
+        """Advance every member to t1 (s); pieces that left in most members are dropped."""
+        m = len(self.states)
+        results = advance_many(self.states, self.params, [self.profile()] * m, [t1] * m)
+        self.states = [r.state for r in results]
+        gone: dict[int, int] = {}
+        for r in results:
+            for i in r.exits.ids.tolist() + [f.particle_id for f in r.failures]:
+                gone[i] = gone.get(i, 0) + 1
+        self._exits = [i for i, count in gone.items() if 2 * count > m]
+        self._drop(self._exits)
+
+    def pieces(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """
+        Return the pieces every member holds: ids (n,), mean world x, y (n, 2) (m), spread.
+
+        spread: (n, 2, 2) the members' covariance of x, y (m^2).
+        """
+        ids = self._common()
+        if not len(ids):
+            return ids, np.zeros((0, 2)), np.zeros((0, 2, 2))
+        xy = np.stack([self._world(s, ids)[:, :2] for s in self.states])  # (M, n, 2)
+        anomalies = xy - xy.mean(axis=0)
+        covariance = np.einsum('mni,mnj->nij', anomalies, anomalies) / (len(xy) - 1)
+        return ids, xy.mean(axis=0), covariance
+
+    def parameters(self) -> dict[str, tuple[float, float]]:
+        """Return the product's d and mu_C: (estimate, spread) each, over the members."""
+        d = np.exp(self.log_d)
+        return {'d': (float(d.mean()), float(d.std(ddof=1))),
+                'mu_C': (float(self.mu_c.mean()), float(self.mu_c.std(ddof=1)))}
+
+    def update(self, t: float, detections: np.ndarray,
+               masses: np.ndarray | None = None) -> Frame:
+        """
+        Take a frame of detections at t (s): predict to t, associate, analyse, births.
+
+        detections: (k, 2 or 3) world-frame positions (m; z is not used); masses: (k,) (kg),
+        or None: the product's mean mass.
+        """
+        detections = np.asarray(detections, dtype=float).reshape(-1, detections.shape[-1])
+        if not np.isfinite(detections).all():
+            raise ValueError('a detection is not finite')
+        if t < self.t:  # re-running from a history of states is still to come
+            raise ValueError(f'detections at t = {t} s are older than the twin ({self.t} s)')
+        if t > self.t:
+            self.predict(t)
+        exits = len(self._exits)
+        self._exits = []
+        self._drift(t)
+        ids, mean, spread = self.pieces()
+        sigma = self.settings.sigma
+        noise = np.eye(2) * sigma ** 2
+        match = associate(mean, spread + noise, detections[:, :2])
+        nis, observed = 0.0, 0
+        if len(match.pairs):
+            nis, observed = self._analyse(ids, match.pairs, detections[:, :2])
+            for piece, _ in match.pairs:
+                self.last_seen[int(ids[piece])] = t
+        # a detection left over is a birth, unless it is within 3 sigma of the rim (a piece
+        # leaving, or a false detection there: no member could hold it on the cone)
+        rim = self.params.model.r - 3.0 * sigma
+        left = match.unassigned
+        born = left[np.hypot(detections[left, 0], detections[left, 1]) < rim]
+        if len(born):
+            weights = None if masses is None else np.asarray(masses, dtype=float)[born]
+            self._birth(detections[born, :2], weights, t)
+        dead = [i for i in ids.tolist()
+                if t - self.last_seen.get(i, t) > self.settings.death_after]
+        self._drop(dead)
+        return Frame(t=t, associated=len(match.pairs), births=len(born), deaths=len(dead),
+                     exits=exits, nis=nis, observed=observed)
+
+    def _common(self) -> np.ndarray:
+        ids = self.states[0].ids
+        for s in self.states[1:]:
+            ids = ids[np.isin(ids, s.ids)]
+        return ids
+
+    def _rows(self, state: SimState, ids: np.ndarray) -> np.ndarray:
+        order = {int(i): k for k, i in enumerate(state.ids)}
+        return np.array([order[int(i)] for i in ids], dtype=np.int64)
+
+    def _world(self, state: SimState, ids: np.ndarray) -> np.ndarray:
+        omega = self.profile().omega(state.t)
+        q, _, _ = world_from_cone(state.y[self._rows(state, ids)], state.angle, omega)
+        return q
+
+    def _analyse(self, ids: np.ndarray, pairs: np.ndarray, xy: np.ndarray) -> tuple[float, int]:
+        n = len(ids)
+        width = STATE_SIZE * n
+        rows = [self._rows(s, ids) for s in self.states]
+        ensemble = np.stack([np.concatenate([s.y[r].ravel(), [ld, mu]]) for s, r, ld, mu in
+                             zip(self.states, rows, self.log_d, self.mu_c)])
+        centre = ensemble[:, :width].mean(axis=0)  # the pieces' states; the parameters drift
+        ensemble[:, :width] = centre + self.settings.inflation * (ensemble[:, :width] - centre)
+        angle = self.states[0].angle
+        seen = rotate_z(np.column_stack([xy[pairs[:, 1]], np.zeros(len(pairs))]), -angle)
+        columns = np.concatenate([STATE_SIZE * pairs[:, 0], STATE_SIZE * pairs[:, 0] + 1])
+        values = np.concatenate([seen[:, 0], seen[:, 1]])
+        sigma = np.full(len(columns), self.settings.sigma)
+        result = analyse(ensemble, columns, values, sigma, self.rng)
+        self.log_d = np.clip(result.ensemble[:, width], *LOG_D_RANGE)
+        self.mu_c = np.clip(result.ensemble[:, width + 1], *MU_C_RANGE)
+        states = []
+        for s, r, row in zip(self.states, rows, result.ensemble):
+            y = s.y.copy()
+            y[r] = row[:width].reshape(n, STATE_SIZE)
+            states.append(replace(s, y=y))
+        self.states = [self._with_products(s, k) for k, s in enumerate(states)]
+        return result.nis, result.observed
+
+    def _product(self, member: int, mass: float) -> ProductParams:
+        return replace(self.params.model.product, m=mass, d=float(np.exp(self.log_d[member])),
+                       mu_C=float(self.mu_c[member]))
+
+    def _with_products(self, state: SimState, member: int) -> SimState:
+        rows = [product_row(self._product(member, self.masses[int(i)])) for i in state.ids]
+        products = np.array(rows).reshape(len(rows), -1) if rows else state.products
+        return replace(state, products=products)
+
+    def _birth(self, xy: np.ndarray, masses: np.ndarray | None, t: float) -> None:
+        model = self.params.model
+        first = self.states[0].next_id
+        weights = [float(model.product.m if masses is None else w) for w in (
+            masses if masses is not None else np.zeros(len(xy)))]
+        grown = []
+        for member, state in enumerate(self.states):
+            points = xy + self.settings.sigma * self.rng.standard_normal(xy.shape)
+            products = [self._product(member, w) for w in weights]
+            q = np.array([[x, y, resting_height(model, product, x, y)]
+                          for (x, y), product in zip(points, products)])
+            state, ids = add_particles(state, self.params, q, products=products,
+                                       omega=self.profile().omega(state.t))
+            grown.append(state)
+        self.states = grown
+        for k, i in enumerate(ids.tolist()):
+            assert i == first + k  # every member numbers its pieces alike
+            self.masses[i] = weights[k]
+            self.last_seen[i] = t
+
+    def _drop(self, ids: list[int]) -> None:
+        if ids:
+            self.states = [remove_particles(s, ids) for s in self.states]
+        for i in ids:
+            self.last_seen.pop(i, None)
+
+    def _drift(self, t: float) -> None:
+        elapsed = max(t - self._drifted, 0.0)
+        self._drifted = t
+        if elapsed > 0.0:
+            scale = self.settings.drift * math.sqrt(elapsed)
+            self.log_d = self.log_d + scale * self.rng.standard_normal(len(self.log_d))
+            self.mu_c = self.mu_c + scale * self.rng.standard_normal(len(self.mu_c))

@@ -1,0 +1,99 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+The twin's estimator following a plant that the test simulates (its truth never shown).
+
+The plant is the physics core itself: five pieces on a cone that speeds up to 6 rad/s and
+reverses, seen at 30 frames/s with 1 mm of noise. The twin starts from nothing and gets
+the detections and the cone speed only.
+"""
+
+from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.rotation import RotationProfile
+from cone_feeder_sim.physics.simulation import (
+    add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
+from cone_feeder_sim.twin.estimator import Frame, Twin, TwinSettings
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+MODEL = ModelParams()
+PARAMS = SimParams(model=MODEL)
+PROFILE = RotationProfile.from_table([[0.0, 0.0], [0.5, 6.0], [1.5, 6.0], [2.0, -6.0]])
+PLACES = [[0.10, 0.02], [-0.08, 0.09], [0.03, -0.13], [-0.12, -0.05], [0.20, 0.03]]
+SIGMA = 0.001  # m
+
+
+def follow(twin: Twin, frames: int) -> list[tuple[Frame, int, float]]:
+    """Run the plant and the twin; return per frame (the twin's frame, pieces, worst error)."""
+    rng = np.random.default_rng(0)
+    q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in PLACES])
+    plant, _ = add_particles(SimState(), PARAMS, q)
+    out = []
+    for k in range(1, frames + 1):
+        t = k / 30.0
+        plant = advance(plant, PARAMS, PROFILE, t).state
+        twin.cone_speed(t, PROFILE.omega(t))
+        seen, _, _ = world_from_cone(plant.y, plant.angle, PROFILE.omega(t))
+        frame = twin.update(t, seen[:, :2] + rng.normal(0.0, SIGMA, (plant.count, 2)))
+        _, mean, _ = twin.pieces()
+        error = np.linalg.norm(mean[:, None, :] - seen[None, :, :2], axis=2).min(axis=1)
+        out.append((frame, plant.count, float(error.max()) if len(error) else np.inf))
+    return out
+
+
+@pytest.fixture(scope='module')
+def followed() -> tuple[Twin, list[tuple[Frame, int, float]]]:
+    twin = Twin(PARAMS, TwinSettings(members=32, sigma=SIGMA, d_spread=0.05,
+                                     mu_C_spread=0.01, seed=1))
+    return twin, follow(twin, 75)
+
+
+def test_pieces_are_born_once_and_then_followed(followed: tuple) -> None:
+    _, frames = followed
+    assert frames[0][0].births == 5  # the first frame: every piece is new
+    assert sum(frame.births for frame, _, _ in frames[1:]) == 0
+    assert all(frame.associated == count for frame, count, _ in frames[1:])
+    assert max(error for _, _, error in frames[1:]) < 5.0 * SIGMA
+
+
+def test_the_innovations_are_consistent_with_the_reported_spread(followed: tuple) -> None:
+    # the sum of the frames' NIS is chi-square with the observations' count: inside its
+    # two-sided bounds at alpha = 1e-3
+    _, frames = followed
+    nis = sum(frame.nis for frame, _, _ in frames[1:])
+    dof = sum(frame.observed for frame, _, _ in frames[1:])
+    assert dof > 500
+    assert chi2.ppf(5e-4, dof) < nis < chi2.ppf(1.0 - 5e-4, dof)
+
+
+def test_a_piece_that_leaves_the_plant_leaves_the_twin(followed: tuple) -> None:
+    twin, frames = followed
+    left = frames[0][1] - frames[-1][1]
+    assert left >= 1  # the cone at 6 rad/s throws the outermost piece off (at 0.77 s)
+    assert sum(frame.exits + frame.deaths for frame, _, _ in frames) == left
+    assert len(twin.pieces()[0]) == frames[-1][1]
+
+
+def test_bad_input_is_refused_with_its_reason() -> None:
+    twin = Twin(PARAMS, TwinSettings(members=4))
+    twin.update(0.1, np.array([[0.1, 0.0]]))
+    with pytest.raises(ValueError, match='not finite'):
+        twin.update(0.2, np.array([[np.nan, 0.0]]))
+    with pytest.raises(ValueError, match='older than the twin'):
+        twin.update(0.05, np.array([[0.1, 0.0]]))
+    with pytest.raises(ValueError, match='cone speed'):
+        twin.cone_speed(-1.0, 1.0)
+    with pytest.raises(ValueError, match='at least 2'):
+        Twin(PARAMS, TwinSettings(members=1))
