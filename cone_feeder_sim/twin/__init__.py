@@ -18,7 +18,9 @@ Built so far, each with its checks (doc/twin.md): ``enkf`` (the ensemble Kalman 
 analysis of an ensemble of states against observed positions, with the normalised innovation
 squared), ``association`` (detections to the twin's pieces: a chi-square gate, then an
 optimal assignment) and ``estimator`` (``Twin``: an ensemble of the physics core's states
-following detections, births, deaths and exits, d and mu_C as augmented state). Still to
-come: late detections re-run from their stamp, the channel forecasts, the headless
+following detections, births, deaths and exits, d and mu_C as augmented state) and
+``forecast`` (each piece's channel probabilities and exit time, each channel's mass over
+the horizons, from the members). Still to come: late detections re-run from their stamp,
+the headless
 ``cone-feeder-sim twin`` and ``twin_node``. No ROS here.
 """

@@ -1,0 +1,97 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+The twin's forecasts against what the plant then does, and against a simple baseline.
+
+Twelve pieces strewn over a cone that speeds up to 8 rad/s (eight leave within 1.4 s), seen
+at 30 frames/s with 1 mm of noise; every 0.2 s the twin forecasts under the cone's
+commanded rotation, and each piece that the plant then lets leave within 1 s is scored:
+the twin's most likely channel against the channel it left by, and against a
+constant-velocity extrapolation of its last two detections to the rim.
+"""
+
+from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.rotation import RotationProfile
+from cone_feeder_sim.physics.simulation import (
+    add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
+from cone_feeder_sim.twin.estimator import Twin, TwinSettings
+from cone_feeder_sim.twin.forecast import forecast
+import numpy as np
+import pytest
+
+MODEL = ModelParams()
+PARAMS = SimParams(model=MODEL)
+PROFILE = RotationProfile.from_table([[0.0, 0.0], [0.5, 8.0]])
+
+
+def straight_to_rim(last: np.ndarray, before: np.ndarray) -> int:
+    """Return the channel where the line through two positions (m) crosses the rim."""
+    direction = last - before
+    if not np.any(direction):
+        direction = last
+    direction = direction / np.linalg.norm(direction)
+    b = last @ direction
+    s = -b + np.sqrt(b * b - (last @ last - MODEL.r ** 2))
+    point = last + s * direction
+    return int(MODEL.channels.channel_of(np.degrees(np.arctan2(point[1], point[0]))))
+
+
+@pytest.fixture(scope='module')
+def scored() -> dict[str, int]:
+    rng = np.random.default_rng(3)
+    radius, angle = rng.uniform(0.08, 0.2, 12), rng.uniform(0.0, 2.0 * np.pi, 12)
+    xy = np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
+    q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in xy])
+    plant, _ = add_particles(SimState(), PARAMS, q)
+    twin = Twin(PARAMS, TwinSettings(members=32, sigma=0.001, d_spread=0.05, mu_C_spread=0.01,
+                                     seed=1))
+    noise = np.random.default_rng(0)
+    truth: dict[int, tuple[int, float]] = {}
+    made = []
+    previous = None
+    for k in range(1, 91):
+        t = k / 30.0
+        step = advance(plant, PARAMS, PROFILE, t)
+        plant = step.state
+        truth.update({int(i): (int(c), float(s)) for i, c, s in zip(
+            step.exits.ids, step.exits.channel, step.exits.t)})
+        twin.cone_speed(t, PROFILE.omega(t))
+        seen, _, _ = world_from_cone(plant.y, plant.angle, PROFILE.omega(t))
+        detected = seen[:, :2] + noise.normal(0.0, 0.001, (plant.count, 2))
+        twin.update(t, detected)
+        if k % 6 == 0:
+            ids, mean, _ = twin.pieces()
+            nearest = np.argmin(np.linalg.norm(mean[:, None] - seen[None, :, :2], axis=2), axis=1)
+            owner = dict(zip(ids.tolist(), plant.ids[nearest].tolist()))
+            lines = {int(i): straight_to_rim(detected[n], previous[int(i)])
+                     for n, i in enumerate(plant.ids) if previous and int(i) in previous}
+            made.append((t, forecast(twin, (1.0,), rotation=PROFILE), owner, lines))
+        previous = {int(i): detected[n] for n, i in enumerate(plant.ids)}
+    counts = {'scored': 0, 'twin': 0, 'line': 0}
+    for t, result, owner, lines in made:
+        best, _ = result.most_likely()
+        for j, i in enumerate(result.ids.tolist()):
+            channel, when = truth.get(owner[i], (0, np.inf))
+            if 0.0 < when - t <= 1.0 and owner[i] in lines:
+                counts['scored'] += 1
+                counts['twin'] += int(best[j] == channel)
+                counts['line'] += int(lines[owner[i]] == channel)
+    return counts
+
+
+def test_the_twin_names_the_channel_more_often_than_a_straight_line(scored: dict) -> None:
+    # measured: the twin 28 of 34, the straight line 2 of 34
+    assert scored['scored'] >= 25
+    assert scored['twin'] >= 0.75 * scored['scored']
+    assert scored['twin'] > scored['line']
