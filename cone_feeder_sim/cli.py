@@ -267,6 +267,12 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument('--workers', type=int, metavar='N',
                      help="run the fit's simulations on a local Dask cluster of N worker "
                           'processes; default: this process')
+    twin = sub.add_parser(
+        'twin', help='follow recorded detections with the digital twin; write its forecasts '
+                     '(channel_forecast.csv, pieces.csv, parameters.csv, frames.csv)')
+    twin.add_argument('twin', metavar='TWIN.yaml',
+                      help='twin file: scenario, detections, cone and settings (doc/twin.md)')
+    twin.add_argument('--out', required=True, metavar='DIR', help='directory for the CSVs')
     recover = sub.add_parser(
         'recover', help='copy the readable part of an unfinished or damaged MCAP file into a '
                         'complete one (with summary and footer)')
@@ -472,6 +478,24 @@ SWEEP_INSTALL = ('the sweep runs on Dask, which is not installed; install it wit
                  "pip install 'cone_feeder_sim[sweep]' (or pip install 'dask[distributed]')")
 
 
+def cmd_twin(args: argparse.Namespace, err: TextIO) -> int:
+    """Run the twin over a twin file's recorded streams; write its CSVs."""
+    from .twin.run import run_twin
+    from .twin.spec import load_twin
+
+    spec = load_twin(args.twin)
+    out = Path(args.out)
+    warm_up()
+    start = time.perf_counter()
+    summary = run_twin(spec, out, log=lambda line: err.write(f'{line}\n'))
+    wall = time.perf_counter() - start
+    span = float(spec.detections[-1, 0] - spec.detections[0, 0]) if len(spec.detections) else 0.0
+    err.write(f'{summary.frames} frames ({summary.refused} refused), {summary.forecasts} '
+              f'forecasts; NIS {summary.nis:.1f} for {summary.observed} observations; '
+              f'{span:.2f} s of stream in {wall:.2f} s; written to {out}\n')
+    return 0
+
+
 def cmd_sweep(args: argparse.Namespace, err: TextIO) -> int:
     """Run a sweep's pending jobs; return 0 if all are done, 1 if some failed."""
     from .sweep.spec import load_sweep
@@ -538,6 +562,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return cmd_compile(sys.stderr)
         if args.command == 'fit':
             return cmd_fit(args, sys.stderr)
+        if args.command == 'twin':
+            return cmd_twin(args, sys.stderr)
     except ConeFeederError as exc:
         sys.stderr.write(f'error: {exc}\n')
         return 2

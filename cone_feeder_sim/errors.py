@@ -57,3 +57,7 @@ class EnvConfigError(ConeFeederError, ValueError):
 
 class ViewError(ConeFeederError):
     """The live view cannot start: no foxglove-sdk, its port is taken, or a bad setting."""
+
+
+class TwinError(ConeFeederError, ValueError):
+    """A twin file or its streams are malformed (the key, file or row is named)."""

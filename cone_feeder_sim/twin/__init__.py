@@ -20,7 +20,7 @@ squared), ``association`` (detections to the twin's pieces: a chi-square gate, t
 optimal assignment) and ``estimator`` (``Twin``: an ensemble of the physics core's states
 following detections, births, deaths and exits, d and mu_C as augmented state) and
 ``forecast`` (each piece's channel probabilities and exit time, each channel's mass over
-the horizons, from the members). Still to come: late detections re-run from their stamp,
-the headless
-``cone-feeder-sim twin`` and ``twin_node``. No ROS here.
+the horizons, from the members), ``spec`` and ``run`` (the headless ``cone-feeder-sim twin``
+over recorded CSV streams). Still to come: late detections re-run from their stamp, MCAP
+streams, the report and ``twin_node``. No ROS here.
 """

@@ -1,0 +1,144 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+The twin file of ``cone-feeder-sim twin``: a scenario, the streams, the estimator's settings.
+
+A twin file is a YAML mapping::
+
+    scenario: base.yaml        # the machine, the product prior (model.d, model.mu_C), the
+                               # solver; its particles and rotation are not used
+    detections: detections.csv # columns t, x, y, z, track_id[, mass] (s, m, m, m, -, kg)
+    cone: cone.csv             # columns t, omega (s, rad/s)
+    # defaults:
+    members: 32                # the ensemble's size
+    sigma: 0.002               # the detections' noise (m)
+    horizons: [0.5, 1.0, 2.0]  # forecast horizons (s)
+    every: 0.1                 # forecast every (s)
+    seed: 0
+
+Paths are relative to the twin file. Errors name the key, the file and the row. A
+detection that is not finite (nan, inf) is read, and its frame refused when the twin gets
+to it: the rest of the stream goes on.
+"""
+
+import csv
+from dataclasses import dataclass
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ConeFeederError, TwinError
+from ..feeder.scenario import Scenario
+from ..formats.parameter_file import read_yaml
+from ..formats.scenario_file import load_scenario
+
+__all__ = ['load_twin', 'TwinSpec', 'TWIN_KEYS']
+
+TWIN_KEYS = ('scenario', 'detections', 'cone', 'members', 'sigma', 'horizons', 'every', 'seed')
+
+
+@dataclass(frozen=True)
+class TwinSpec:
+    """
+    A validated twin file.
+
+    scenario: the machine and the product prior; detections: (k, 5) rows t (s), x, y, z (m),
+    mass (kg, NaN: not given), sorted by t; cone: (j, 2) rows t (s), omega (rad/s), sorted;
+    members, sigma (m), horizons (s), every (s), seed as in the file.
+    """
+
+    scenario: Scenario
+    detections: np.ndarray
+    cone: np.ndarray
+    members: int = 32
+    sigma: float = 0.002
+    horizons: tuple[float, ...] = (0.5, 1.0, 2.0)
+    every: float = 0.1
+    seed: int = 0
+
+
+def _rows(path: Path, columns: tuple[str, ...], optional: tuple[str, ...]) -> np.ndarray:
+    """Read a CSV's columns (missing optional ones and empty cells: NaN), sorted by t."""
+    try:
+        with path.open(newline='', encoding='utf-8') as stream:
+            reader = csv.DictReader(stream)
+            names = reader.fieldnames or []
+            missing = [c for c in columns if c not in names]
+            if missing:
+                raise TwinError(f'{path}: missing column(s) {", ".join(missing)} '
+                                f'(has {", ".join(names) or "none"})')
+            rows = []
+            for number, row in enumerate(reader, start=2):
+                values = []
+                for c in columns + optional:
+                    cell = (row.get(c) or '').strip()
+                    try:
+                        values.append(float(cell) if cell else math.nan)
+                    except ValueError:
+                        raise TwinError(f'{path}, row {number}: {c} is not a number: '
+                                        f'{cell!r}') from None
+                if not math.isfinite(values[0]):
+                    raise TwinError(f'{path}, row {number}: t must be a finite number, got '
+                                    f'{row.get("t")!r}')
+                rows.append(values)
+    except OSError as exc:
+        raise TwinError(f'{path}: cannot be read ({exc.strerror})') from None
+    table = np.array(rows, dtype=float).reshape(len(rows), len(columns) + len(optional))
+    return table[np.argsort(table[:, 0], kind='stable')]
+
+
+def _number(content: dict, key: str, default: Any, low: float, integer: bool = False) -> Any:
+    value = content.get(key, default)
+    kind = int if integer else (int, float)
+    if isinstance(value, bool) or not isinstance(value, kind) or not value >= low or (
+            not math.isfinite(value)):
+        raise TwinError(f'{key} must be {"an integer" if integer else "a number"} >= {low}, '
+                        f'got {value!r}')
+    return value
+
+
+def load_twin(path: str | Path) -> TwinSpec:
+    """Read and validate a twin file and its streams."""
+    path = Path(path)
+    try:
+        content = read_yaml(path)
+    except ConeFeederError as exc:
+        raise TwinError(str(exc)) from exc
+    if not isinstance(content, dict):
+        raise TwinError(f'{path}: a twin file is a mapping, got {type(content).__name__}')
+    unknown = sorted(set(content) - set(TWIN_KEYS))
+    if unknown:
+        raise TwinError(f'unknown twin key(s) {", ".join(map(repr, unknown))}; known: '
+                        f'{", ".join(TWIN_KEYS)}')
+    for key in ('scenario', 'detections', 'cone'):
+        if not isinstance(content.get(key), str):
+            raise TwinError(f'{key} must name a file, got {content.get(key)!r}')
+    base = path.parent
+    scenario = load_scenario(base / content['scenario'])
+    detections = _rows(base / content['detections'], ('t', 'x', 'y'), ('z', 'mass'))
+    cone = _rows(base / content['cone'], ('t', 'omega'), ())
+    horizons = content.get('horizons', [0.5, 1.0, 2.0])
+    if (not isinstance(horizons, list) or not horizons or any(
+            isinstance(h, bool) or not isinstance(h, (int, float)) or not 0 < h <= 60
+            for h in horizons)):
+        raise TwinError(f'horizons must be a list of numbers in (0, 60] s, got {horizons!r}')
+    return TwinSpec(
+        scenario=scenario, detections=detections, cone=cone,
+        members=_number(content, 'members', 32, 2, integer=True),
+        sigma=float(_number(content, 'sigma', 0.002, 1e-6)),
+        horizons=tuple(sorted(float(h) for h in horizons)),
+        every=float(_number(content, 'every', 0.1, 1e-3)),
+        seed=_number(content, 'seed', 0, 0, integer=True))

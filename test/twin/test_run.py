@@ -1,0 +1,111 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""The headless twin: a twin file's streams in, the CSVs out; bad frames refused, named."""
+
+import csv
+from pathlib import Path
+
+from cone_feeder_sim.cli import main
+from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.rotation import RotationProfile
+from cone_feeder_sim.physics.simulation import (
+    add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
+from cone_feeder_sim.twin.run import FILES
+import numpy as np
+import pytest
+import yaml
+
+MODEL = ModelParams()
+PARAMS = SimParams(model=MODEL)
+ROTATION = [[0.0, 0.0], [0.5, 6.0]]
+PLACES = [[0.10, 0.02], [-0.08, 0.09], [0.03, -0.13], [-0.12, -0.05], [0.20, 0.03]]
+
+
+def write_streams(folder: Path, seconds: float = 1.5) -> None:
+    """Simulate the plant; write detections.csv (with one bad row), cone.csv, the files."""
+    profile = RotationProfile.from_table(ROTATION)
+    q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in PLACES])
+    plant, _ = add_particles(SimState(), PARAMS, q)
+    rng = np.random.default_rng(0)
+    with (folder / 'detections.csv').open('w', newline='') as d, \
+            (folder / 'cone.csv').open('w', newline='') as c:
+        detections, cone = csv.writer(d), csv.writer(c)
+        detections.writerow(['t', 'x', 'y', 'z', 'track_id'])
+        cone.writerow(['t', 'omega'])
+        for k in range(1, int(seconds * 30) + 1):
+            t = k / 30.0
+            plant = advance(plant, PARAMS, profile, t).state
+            cone.writerow([f'{t:.6f}', profile.omega(t)])
+            seen, _, _ = world_from_cone(plant.y, plant.angle, profile.omega(t))
+            seen[:, :2] += rng.normal(0.0, 0.001, (plant.count, 2))
+            for (x, y, z), i in zip(seen, plant.ids):
+                detections.writerow([f'{t:.6f}', x, y, z, '' if k % 7 == 0 else int(i)])
+            if k == 20:  # a bad frame of its own stamp: a coordinate not finite
+                detections.writerow([f'{t + 0.01:.6f}', 'nan', 0.0, 0.0, ''])
+    (folder / 'scenario.yaml').write_text(yaml.safe_dump(
+        {'duration': seconds, 'rotation': ROTATION,
+         'particles': [{'position': [0.1, 0.0, 0.0], 'on_surface': True}]}))
+    (folder / 'twin.yaml').write_text(yaml.safe_dump(
+        {'scenario': 'scenario.yaml', 'detections': 'detections.csv', 'cone': 'cone.csv',
+         'sigma': 0.001}))
+
+
+def read(path: Path) -> list[dict]:
+    """Return a CSV's rows as dicts."""
+    with path.open(newline='') as stream:
+        return list(csv.DictReader(stream))
+
+
+def test_the_command_writes_the_forecasts(tmp_path: Path,
+                                          capsys: pytest.CaptureFixture) -> None:
+    write_streams(tmp_path)
+    out = tmp_path / 'out'
+    assert main(['twin', str(tmp_path / 'twin.yaml'), '--out', str(out)]) == 0
+    printed = capsys.readouterr().err
+    assert 'refused: a detection is not finite' in printed and '(1 refused)' in printed
+    for name, columns in FILES.items():
+        with (out / name).open(newline='') as stream:
+            assert next(csv.reader(stream)) == list(columns)
+    channels = read(out / 'channel_forecast.csv')
+    times = sorted({float(r['t']) for r in channels})
+    assert len(times) == 15 and np.allclose(np.diff(times), 0.1, atol=0.02)
+    assert {r['horizon'] for r in channels} == {'0.5', '1', '2'}
+    assert len(channels) == 15 * 3 * MODEL.channels.count
+    # the masses: none negative, and no channel gets more than the pieces on the cone weigh
+    masses = np.array([float(r['mass']) for r in channels])
+    assert masses.min() >= 0.0 and masses.max() <= 5 * MODEL.product.m + 1e-12
+    pieces = read(out / 'pieces.csv')
+    assert {r['piece'] for r in pieces} == {'0', '1', '2', '3', '4'}
+    assert all(0.0 < float(r['probability']) <= 1.0 for r in pieces)
+    parameters = read(out / 'parameters.csv')
+    assert {r['key'] for r in parameters} == {'d', 'mu_C'} and len(parameters) == 30
+    frames = read(out / 'frames.csv')
+    assert len(frames) == 45 and int(frames[0]['births']) == 5
+    assert all(int(f['associated']) == int(f['detections']) for f in frames[1:])
+
+
+@pytest.mark.parametrize(('change', 'message'), [
+    ({'speed': 1}, "unknown twin key(s) 'speed'"),
+    ({'members': 1}, 'members must be an integer >= 2, got 1'),
+    ({'horizons': [0.5, -1]}, 'horizons must be a list of numbers in (0, 60] s'),
+    ({'cone': 'detections.csv'}, 'missing column(s) omega'),
+    ({'detections': 'none.csv'}, 'cannot be read'),
+])
+def test_a_bad_twin_file_is_named(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                  change: dict, message: str) -> None:
+    write_streams(tmp_path, 0.2)
+    content = yaml.safe_load((tmp_path / 'twin.yaml').read_text())
+    (tmp_path / 'twin.yaml').write_text(yaml.safe_dump({**content, **change}))
+    assert main(['twin', str(tmp_path / 'twin.yaml'), '--out', str(tmp_path / 'o')]) == 2
+    assert message in capsys.readouterr().err
