@@ -116,6 +116,7 @@ class Twin:
         self.mu_c = settings.mu_C + settings.mu_C_spread * self.rng.standard_normal(m)
         self.states = [SimState(t=t0) for _ in range(m)]
         self.times, self.omegas = [t0], [0.0]
+        self._profile = RotationProfile(np.array(self.times), np.array(self.omegas))
         self.masses: dict[int, float] = {}
         self.last_seen: dict[int, float] = {}
         self._exits: list[int] = []
@@ -128,10 +129,15 @@ class Twin:
 
     def profile(self) -> RotationProfile:
         """Return the cone speed measured so far (held after the last measurement)."""
-        return RotationProfile(np.array(self.times), np.array(self.omegas))
+        return self._profile
 
     def cone_speed(self, t: float, omega: float) -> None:
-        """Take a measured cone speed (rad/s) at t (s), not before the last one."""
+        """
+        Take a measured cone speed (rad/s) at t (s), not before the last one.
+
+        Measurements before the last one at or before the twin's time are forgotten: the
+        members never go back, so the profile keeps only what they still need.
+        """
         if not math.isfinite(omega) or t < self.times[-1]:
             raise ValueError(f'cone speed {omega} at t = {t} s: not finite or out of order')
         if t == self.times[-1]:
@@ -139,11 +145,14 @@ class Twin:
         else:
             self.times.append(float(t))
             self.omegas.append(float(omega))
+        first = max(int(np.searchsorted(self.times, self.t, side='right')) - 1, 0)
+        del self.times[:first], self.omegas[:first]
+        self._profile = RotationProfile(np.array(self.times), np.array(self.omegas))
 
     def predict(self, t1: float) -> None:
         """Advance every member to t1 (s); pieces that left in most members are dropped."""
         m = len(self.states)
-        results = advance_many(self.states, self.params, [self.profile()] * m, [t1] * m)
+        results = advance_many(self.states, self.params, [self._profile] * m, [t1] * m)
         self.states = [r.state for r in results]
         gone: dict[int, int] = {}
         for r in results:
@@ -161,7 +170,8 @@ class Twin:
         ids = self._common()
         if not len(ids):
             return ids, np.zeros((0, 2)), np.zeros((0, 2, 2))
-        xy = np.stack([self._world(s, ids)[:, :2] for s in self.states])  # (M, n, 2)
+        omega = self._profile.omega(self.t)
+        xy = np.stack([self._world(s, ids, omega)[:, :2] for s in self.states])  # (M, n, 2)
         anomalies = xy - xy.mean(axis=0)
         covariance = np.einsum('mni,mnj->nij', anomalies, anomalies) / (len(xy) - 1)
         return ids, xy.mean(axis=0), covariance
@@ -223,8 +233,7 @@ class Twin:
         order = {int(i): k for k, i in enumerate(state.ids)}
         return np.array([order[int(i)] for i in ids], dtype=np.int64)
 
-    def _world(self, state: SimState, ids: np.ndarray) -> np.ndarray:
-        omega = self.profile().omega(state.t)
+    def _world(self, state: SimState, ids: np.ndarray, omega: float) -> np.ndarray:
         q, _, _ = world_from_cone(state.y[self._rows(state, ids)], state.angle, omega)
         return q
 
@@ -257,23 +266,30 @@ class Twin:
                        mu_C=float(self.mu_c[member]))
 
     def _with_products(self, state: SimState, member: int) -> SimState:
-        rows = [product_row(self._product(member, self.masses[int(i)])) for i in state.ids]
-        products = np.array(rows).reshape(len(rows), -1) if rows else state.products
-        return replace(state, products=products)
+        """Return the state with its products' rows for the member's d and mu_C."""
+        if not state.count:
+            return state
+        rows: dict[float, np.ndarray] = {}  # one row per mass: the pieces mostly share one
+        for i in state.ids.tolist():
+            mass = self.masses[i]
+            if mass not in rows:
+                rows[mass] = product_row(self._product(member, mass))
+        return replace(state, products=np.array([rows[self.masses[i]]
+                                                 for i in state.ids.tolist()]))
 
     def _birth(self, xy: np.ndarray, masses: np.ndarray | None, t: float) -> None:
         model = self.params.model
         first = self.states[0].next_id
-        weights = [float(model.product.m if masses is None else w) for w in (
-            masses if masses is not None else np.zeros(len(xy)))]
+        weights = ([model.product.m] * len(xy) if masses is None
+                   else [float(w) for w in masses])
+        omega = self._profile.omega(self.t)
         grown = []
         for member, state in enumerate(self.states):
             points = xy + self.settings.sigma * self.rng.standard_normal(xy.shape)
             products = [self._product(member, w) for w in weights]
             q = np.array([[x, y, resting_height(model, product, x, y)]
                           for (x, y), product in zip(points, products)])
-            state, ids = add_particles(state, self.params, q, products=products,
-                                       omega=self.profile().omega(state.t))
+            state, ids = add_particles(state, self.params, q, products=products, omega=omega)
             grown.append(state)
         self.states = grown
         for k, i in enumerate(ids.tolist()):

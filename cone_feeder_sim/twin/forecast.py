@@ -94,7 +94,6 @@ def forecast(twin: Twin, horizons: tuple[float, ...] = (0.5, 1.0, 2.0),
                 times[k] += t
                 left[k] += 1
     counts[:, 0] = m - left
-    with np.errstate(invalid='ignore'):
-        exit_time = np.where(left > 0, times / np.maximum(left, 1), np.nan)
+    exit_time = np.where(left > 0, times / np.maximum(left, 1), np.nan)
     return Forecast(t=t0, ids=ids, channel_probability=counts / m, exit_time=exit_time,
                     horizons=h, mass=mass.mean(axis=0), mass_spread=mass.std(axis=0, ddof=1))

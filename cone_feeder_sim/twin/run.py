@@ -19,7 +19,7 @@ its stamp are taken; the frame is then associated and analysed (:class:`.estimat
 Every ``every`` s of stream time the twin forecasts (:func:`.forecast.forecast`, under the
 measured speed held). A bad frame (a coordinate not finite, more than
 :data:`MAX_DETECTIONS` points, a stamp older than the twin) is refused with one line and
-the twin goes on. The output directory gets:
+the twin goes on; so is a cone speed that is not finite. The output directory gets:
 
 - ``channel_forecast.csv``: t, horizon, channel, mass, spread (s, s, -, kg, kg);
 - ``pieces.csv``: t, piece, x, y, channel (0: stays), probability, exit_time (s, -, m, m,
@@ -73,11 +73,11 @@ def run_twin(spec: TwinSpec, out: Path,
     out.mkdir(parents=True, exist_ok=True)
     scenario = spec.scenario
     product = scenario.model.product
+    firsts = [table[0, 0] for table in (spec.detections, spec.cone) if len(table)]
     twin = Twin(SimParams(model=scenario.model, solver=scenario.solver),
                 TwinSettings(members=spec.members, sigma=spec.sigma, d=product.d,
                              mu_C=product.mu_C, seed=spec.seed),
-                t0=float(min(spec.detections[0, 0], spec.cone[0, 0])) if len(
-                    spec.detections) and len(spec.cone) else 0.0)
+                t0=float(min(firsts, default=0.0)))
     stamps, starts = np.unique(spec.detections[:, 0], return_index=True)
     ends = list(starts[1:]) + [len(spec.detections)]
     cone = iter(spec.cone.tolist())
@@ -93,8 +93,10 @@ def run_twin(spec: TwinSpec, out: Path,
             writers[name].writerow(columns)
         for t, a, b in zip(stamps.tolist(), starts, ends):
             while pending is not None and pending[0] <= t:
-                with contextlib.suppress(ValueError):
+                try:
                     twin.cone_speed(pending[0], pending[1])
+                except ValueError as exc:
+                    log(f'cone speed refused: {exc}')
                 pending = next(cone, None)
             rows = spec.detections[a:b]
             if len(rows) > MAX_DETECTIONS:
@@ -102,7 +104,7 @@ def run_twin(spec: TwinSpec, out: Path,
                 log(f'frame at t = {t:.4f} s refused: {len(rows)} detections, more than '
                     f'{MAX_DETECTIONS}')
                 continue
-            masses = rows[:, 4] if not np.isnan(rows[:, 4]).any() else None
+            masses = rows[:, 3] if not np.isnan(rows[:, 3]).any() else None
             try:
                 frame = twin.update(t, rows[:, 1:3], masses)
             except ValueError as exc:

@@ -55,9 +55,9 @@ class TwinSpec:
     """
     A validated twin file.
 
-    scenario: the machine and the product prior; detections: (k, 5) rows t (s), x, y, z (m),
-    mass (kg, NaN: not given), sorted by t; cone: (j, 2) rows t (s), omega (rad/s), sorted;
-    members, sigma (m), horizons (s), every (s), seed as in the file.
+    scenario: the machine and the product prior; detections: (k, 4) rows t (s), x, y (m),
+    mass (kg, NaN: not given), sorted by t (z and track_id are not read); cone: (j, 2) rows
+    t (s), omega (rad/s), sorted; members, sigma (m), horizons (s), every (s), seed as in the file.
     """
 
     scenario: Scenario
@@ -128,7 +128,7 @@ def load_twin(path: str | Path) -> TwinSpec:
             raise TwinError(f'{key} must name a file, got {content.get(key)!r}')
     base = path.parent
     scenario = load_scenario(base / content['scenario'])
-    detections = _rows(base / content['detections'], ('t', 'x', 'y'), ('z', 'mass'))
+    detections = _rows(base / content['detections'], ('t', 'x', 'y'), ('mass',))
     cone = _rows(base / content['cone'], ('t', 'omega'), ())
     horizons = content.get('horizons', [0.5, 1.0, 2.0])
     if (not isinstance(horizons, list) or not horizons or any(
