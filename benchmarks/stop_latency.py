@@ -18,8 +18,9 @@ How long a run and a node take to end after SIGINT or SIGTERM, in the expensive 
 Each case starts a process, lets it compute for ``--after`` seconds of wall time and sends
 the signal; the figure is the time from the signal to the process's exit (its files
 closed). Cases: ``cone-feeder-sim run`` of 70 pieces in one island coupled exactly (each
-0.01-s output interval takes seconds), of 2,000 pieces alone on a reversing cone, and
-``sim_node`` with the same crowd as its initial pieces (the tick under way takes seconds)::
+0.01-s output interval takes seconds) and by the default island coupling, of 2,000 pieces
+alone on a reversing cone, and ``sim_node`` with the same crowd as its initial pieces
+(exact and the default island coupling; the tick under way takes seconds)::
 
     .venv/bin/python benchmarks/stop_latency.py [--after 5] [--repeat 3]
 """
@@ -42,11 +43,11 @@ sys.path.insert(0, str(ROOT / 'test'))
 from crowds import crowd_in_layers  # noqa: E402, I100 - the tests' crowd
 
 
-def scenario(positions: np.ndarray, extra: str) -> str:
-    """Return a 10-s scenario of pieces at positions (N, 3), with extra keys."""
+def scenario(positions: np.ndarray, extra: str, duration: float = 10.0) -> str:
+    """Return a scenario of ``duration`` s of pieces at positions (N, 3), with extra keys."""
     pieces = ''.join(f'  - {{position: [{x!r}, {y!r}, {z!r}]}}\n'
                      for x, y, z in positions.tolist())
-    return (f'duration: 10.0\noutput_interval: 0.01\n{extra}'
+    return (f'duration: {duration}\noutput_interval: 0.01\n{extra}'
             f'rotation: [[0.0, 0.0], [0.3, -8.0], [1.5, -8.0], [1.9, 8.0]]\n'
             f'particles:\n{pieces}')
 
@@ -94,6 +95,7 @@ def main() -> None:
     crowd = crowd_in_layers(2, lift=0.0)
     python = sys.executable
     files = {'crowd.yaml': scenario(crowd, 'interactions: {enabled: true, coupling: exact}\n'),
+             'island.yaml': scenario(crowd, 'interactions: {enabled: true}\n', 600.0),
              'alone.yaml': scenario(alone(2000), '')}
     flat = ', '.join(repr(float(v)) for v in crowd.reshape(-1))
     node = [python, '-m', 'cone_feeder_sim.ros.sim_node', '--ros-args', '-p',
@@ -104,12 +106,15 @@ def main() -> None:
         'run, 70-piece island, coupling exact': [
             python, '-m', 'cone_feeder_sim.cli', 'run', 'crowd.yaml', '--events', 'e.csv',
             '--mcap', 'run.mcap', '--quiet'],
+        'run, 70-piece island, coupling island': [
+            python, '-m', 'cone_feeder_sim.cli', 'run', 'island.yaml', '--events', 'e.csv',
+            '--mcap', 'run.mcap', '--quiet'],
         'run, 2,000 pieces alone': [
             python, '-m', 'cone_feeder_sim.cli', 'run', 'alone.yaml', '--events', 'e.csv',
             '--mcap', 'run.mcap', '--quiet'],
         'sim_node, 70-piece island, coupling exact': node + [
             '-p', 'interactions.coupling:=exact'],
-        'sim_node, 70-piece island, coupling multirate': node,
+        'sim_node, 70-piece island, coupling island': node,
     }
     print(f'{"case":>46} {"signal":>7} {"exit after the signal (s): median, max":>40}')
     for label, command in cases.items():
