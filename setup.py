@@ -108,6 +108,7 @@ setup(
             'replay_node = cone_feeder_sim.ros.replay_node:main',
             'example_controller = cone_feeder_sim.ros.example_controller:main',
             'policy_controller = cone_feeder_sim.ros.policy_controller:main',
+            'twin_node = cone_feeder_sim.ros.twin_node:main',
         ],
     },
 )

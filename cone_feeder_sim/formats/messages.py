@@ -45,6 +45,7 @@ __all__ = [
     'MarkerSchedule',
     'channel_mass_message',
     'clock_message',
+    'cloud_message',
     'cone_state_message',
     'exits_message',
     'header',
@@ -92,7 +93,8 @@ def particles_message(head: dict[str, Any], positions: np.ndarray) -> dict[str, 
     return {'header': head, 'poses': poses}
 
 
-def _cloud(head: dict[str, Any], points: np.ndarray) -> dict[str, Any]:
+def cloud_message(head: dict[str, Any], points: np.ndarray) -> dict[str, Any]:
+    """Return a sensor_msgs/PointCloud2 of a structured array of points (one row)."""
     step = points.dtype.itemsize
     return {'header': head, 'height': 1, 'width': points.shape[0],
             'fields': point_fields(points.dtype), 'is_bigendian': False,
@@ -109,7 +111,7 @@ def states_message(head: dict[str, Any], ids: np.ndarray, positions: np.ndarray,
         points['v' + name] = velocities[:, i]
     points['id'] = ids & 0xFFFFFFFF
     points['mass'] = masses
-    return _cloud(head, points)
+    return cloud_message(head, points)
 
 
 def exits_message(head: dict[str, Any], exits: ExitEvents) -> dict[str, Any]:
@@ -123,7 +125,7 @@ def exits_message(head: dict[str, Any], exits: ExitEvents) -> dict[str, Any]:
     rows['mass'] = exits.mass
     rows['id'] = exits.ids & 0xFFFFFFFF
     rows['channel'] = exits.channel
-    return _cloud(head, rows)
+    return cloud_message(head, rows)
 
 
 def packs_message(head: dict[str, Any], packs: tuple[Pack, ...]) -> dict[str, Any]:
@@ -132,7 +134,7 @@ def packs_message(head: dict[str, Any], packs: tuple[Pack, ...]) -> dict[str, An
     for i, pack in enumerate(packs):
         rows[i] = (pack.t, pack.mass, pack.measured, pack.giveaway, pack.index,
                    sum(1 << (h - 1) for h in pack.heads))
-    return _cloud(head, rows)
+    return cloud_message(head, rows)
 
 
 def hopper_weights_message(readings: np.ndarray) -> dict[str, Any]:

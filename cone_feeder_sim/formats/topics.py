@@ -175,6 +175,9 @@ LATCHED_QOS = QosProfile(history='keep_last', depth=1, reliability='reliable',
                          durability='transient_local')
 CLOCK_QOS = QosProfile(history='keep_last', depth=1, reliability='reliable',
                        durability='volatile')
+#: A camera's stream: the newest frames matter, a lost one is not sent again.
+SENSOR_QOS = QosProfile(history='keep_last', depth=10, reliability='best_effort',
+                        durability='volatile')
 COMMAND_QOS = QosProfile(history='keep_last', depth=10, reliability='reliable',
                          durability='volatile')
 
@@ -206,6 +209,17 @@ TOPICS: Mapping[str, TopicSpec] = {spec.name: spec for spec in (
     TopicSpec('rotation_cmd', 'std_msgs/msg/Float64', 'in', COMMAND_QOS),
     TopicSpec('spawn', 'geometry_msgs/msg/PoseArray', 'in', COMMAND_QOS),
     TopicSpec('channel_feed', 'std_msgs/msg/Float64MultiArray', 'in', COMMAND_QOS),
+)}
+
+#: Every topic of ``twin_node``: the camera's detections and the cone's measured speed (the
+#: plant's ``cone_state``) in, the twin's estimates out.
+TWIN_TOPICS: Mapping[str, TopicSpec] = {spec.name: spec for spec in (
+    TopicSpec('detections', 'sensor_msgs/msg/PointCloud2', 'in', SENSOR_QOS),
+    TopicSpec('cone_state', 'sensor_msgs/msg/JointState', 'in', STATE_QOS),
+    TopicSpec('twin/pieces', 'sensor_msgs/msg/PointCloud2', 'out', STATE_QOS),
+    TopicSpec('twin/channel_forecast', 'std_msgs/msg/Float64MultiArray', 'out', STATE_QOS),
+    TopicSpec('twin/parameters', 'std_msgs/msg/Float64MultiArray', 'out', STATE_QOS),
+    TopicSpec('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', 'out', STATE_QOS),
 )}
 
 #: The topics the headless runner writes (a scenario has no inputs and no wall clock).

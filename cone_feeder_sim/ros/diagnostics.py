@@ -30,8 +30,8 @@ from ..formats.messages import stamp
 from ..formats.run_recorder import RunRecorder
 from ..weigher.machine import WeigherStats
 
-__all__ = ['diagnostics_message', 'DiagnosticsWindow', 'recording_status', 'RunTotals',
-           'simulation_status', 'weigher_status']
+__all__ = ['diagnostic_status', 'diagnostics_message', 'DiagnosticsWindow', 'recording_status',
+           'RunTotals', 'simulation_status', 'weigher_status']
 
 #: The hardware_id of every status.
 HARDWARE_ID = 'cone_feeder'
@@ -113,7 +113,9 @@ class RunTotals:
         self.last_tick = result
 
 
-def _status(level: int, name: str, message: str, values: dict[str, str]) -> dict[str, Any]:
+def diagnostic_status(level: int, name: str, message: str,
+                      values: dict[str, str]) -> dict[str, Any]:
+    """Return a diagnostic_msgs/DiagnosticStatus mapping (the package's hardware id)."""
     return {'level': level, 'name': name, 'message': message, 'hardware_id': HARDWARE_ID,
             'values': [{'key': k, 'value': v} for k, v in values.items()]}
 
@@ -132,7 +134,8 @@ def weigher_status(node: str, stats: WeigherStats) -> dict[str, Any]:
     }
     message = (f'{stats.packs} packs, {stats.packs_per_minute:.1f}/min, giveaway '
                f'{1e3 * stats.giveaway_mean:.1f} g')
-    return _status(WARN if stats.below_tne > 0.0 else OK, f'{node}: weigher', message, values)
+    return diagnostic_status(WARN if stats.below_tne > 0.0 else OK, f'{node}: weigher', message,
+                             values)
 
 
 def recording_status(node: str, recorder: RunRecorder | None,
@@ -149,7 +152,7 @@ def recording_status(node: str, recorder: RunRecorder | None,
         values = {'files': str(len(recorder.paths)),
                   'messages written': str(recorder.message_count),
                   'first file': str(recorder.path)}
-    return _status(level, f'{node}: recording', message, values)
+    return diagnostic_status(level, f'{node}: recording', message, values)
 
 
 def simulation_status(node: str, window: DiagnosticsWindow, now: float, engine: FeederEngine,
@@ -215,7 +218,7 @@ def simulation_status(node: str, window: DiagnosticsWindow, now: float, engine: 
         'cone omega (rad/s)': f'{engine.omega:.4f}',
         'drive mode': res.mode if res is not None else 'not started',
     }
-    return _status(level, f'{node}: simulation', message, values)
+    return diagnostic_status(level, f'{node}: simulation', message, values)
 
 
 def diagnostics_message(node: str, window: DiagnosticsWindow, now: float,

@@ -24,7 +24,7 @@ bytes), which is how the node's recording sees them. A received message larger t
 :data:`MAX_RECORDED_INPUT_BYTES` is not passed on whole.
 """
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 import importlib
 import time
@@ -35,7 +35,7 @@ from rclpy.subscription import Subscription
 
 from .qos import rclpy_qos
 from ..formats.cdr import CdrCodec
-from ..formats.topics import MessageRecord, QosProfile, TOPICS
+from ..formats.topics import MessageRecord, QosProfile, TOPICS, TopicSpec
 
 __all__ = ['MAX_RECORDED_INPUT_BYTES', 'message_class', 'MessageHook', 'Output', 'Outputs',
            'TopicInfo']
@@ -76,23 +76,25 @@ class Output:
 class Outputs:
     """The topics of ``node``: publishers and raw subscriptions, hooks, the topic registry."""
 
-    def __init__(self, node: Node, codec: CdrCodec) -> None:
-        """Start with no topic and no hook."""
+    def __init__(self, node: Node, codec: CdrCodec,
+                 table: Mapping[str, TopicSpec] = TOPICS) -> None:
+        """Start with no topic and no hook; topics are named in table (default sim_node's)."""
         self._node = node
         self._codec = codec
+        self._table = table
         self._hooks: list[MessageHook] = []
         self._topics: dict[str, TopicInfo] = {}
         #: table name (``particles``, ``~/events``) -> resolved topic name
         self.names: dict[str, str] = {}
 
     def _register(self, name: str, topic: str, direction: str) -> None:
-        spec = TOPICS[name]
+        spec = self._table[name]
         self._topics[topic] = TopicInfo(topic, spec.type_name, direction, spec.qos)
         self.names[name] = topic
 
     def publisher(self, name: str) -> Output:
         """Create the publisher of table topic ``name`` (its type and QoS from the table)."""
-        spec = TOPICS[name]
+        spec = self._table[name]
         pub = self._node.create_publisher(message_class(spec.type_name), name,
                                           rclpy_qos(spec.qos))
         self._register(name, pub.topic_name, 'out')
@@ -100,7 +102,7 @@ class Outputs:
 
     def subscription(self, name: str, callback: Callable[[bytes], None]) -> Subscription:
         """Create a raw (serialized bytes) subscription of table topic ``name``."""
-        spec = TOPICS[name]
+        spec = self._table[name]
         sub = self._node.create_subscription(message_class(spec.type_name), name, callback,
                                              rclpy_qos(spec.qos), raw=True)
         self._register(name, sub.topic_name, 'in')
@@ -143,8 +145,8 @@ class Outputs:
             return True
         if len(data) > MAX_RECORDED_INPUT_BYTES:
             return False
-        self._emit(MessageRecord('in', self.names[name], TOPICS[name].type_name, bytes(data),
-                                 stamp_ns, time.time_ns()))
+        self._emit(MessageRecord('in', self.names[name], self._table[name].type_name,
+                                 bytes(data), stamp_ns, time.time_ns()))
         return True
 
     def _emit(self, record: MessageRecord) -> None:

@@ -18,7 +18,7 @@ Frames are the detections sharing a stamp. Before each frame the cone speeds mea
 its stamp are taken; the frame is then associated and analysed (:class:`.estimator.Twin`).
 Every ``every`` s of stream time the twin forecasts (:func:`.forecast.forecast`, under the
 measured speed held). A bad frame (a coordinate not finite, more than
-:data:`MAX_DETECTIONS` points, a stamp older than the twin) is refused with one line and
+:data:`.frames.MAX_DETECTIONS` points, a stamp older than the twin) is refused with one line and
 the twin goes on; so is a cone speed that is not finite. The output directory gets:
 
 - ``channel_forecast.csv``: t, horizon, channel, mass, spread (s, s, -, kg, kg);
@@ -39,13 +39,13 @@ import numpy as np
 
 from .estimator import Twin, TwinSettings
 from .forecast import forecast
+from .frames import detection_frame
 from .spec import TwinSpec
+from ..errors import TwinError
 from ..physics.simulation import SimParams
 
-__all__ = ['MAX_DETECTIONS', 'run_twin', 'TwinSummary']
+__all__ = ['run_twin', 'TwinSummary']
 
-#: The most detections a frame may hold; a larger frame is refused.
-MAX_DETECTIONS = 10_000
 #: The output files and their columns (one table, written once).
 FILES = {
     'channel_forecast.csv': ('t', 'horizon', 'channel', 'mass', 'spread'),
@@ -99,14 +99,14 @@ def run_twin(spec: TwinSpec, out: Path,
                     log(f'cone speed refused: {exc}')
                 pending = next(cone, None)
             rows = spec.detections[a:b]
-            if len(rows) > MAX_DETECTIONS:
-                refused += 1
-                log(f'frame at t = {t:.4f} s refused: {len(rows)} detections, more than '
-                    f'{MAX_DETECTIONS}')
-                continue
-            masses = rows[:, 3] if not np.isnan(rows[:, 3]).any() else None
+            points = np.rec.fromarrays(rows[:, 1:4].T, names=('x', 'y', 'mass'))
             try:
-                frame = twin.update(t, rows[:, 1:3], masses)
+                found = detection_frame(t, points)
+                frame = twin.update(t, found.xy, found.masses)
+            except TwinError as exc:
+                refused += 1
+                log(str(exc))
+                continue
             except ValueError as exc:
                 refused += 1
                 log(f'frame at t = {t:.4f} s refused: {exc}')

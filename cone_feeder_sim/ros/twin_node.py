@@ -1,0 +1,294 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+``twin_node``: the digital twin of a running feeder; detections in, forecasts out.
+
+Run it beside the feeder (or beside ``sim_node`` standing in for one)::
+
+    ros2 run cone_feeder_sim twin_node --ros-args -r detections:=particle_states
+
+It subscribes ``detections`` (sensor_msgs/PointCloud2 in the feeder frame: fields x, y, z,
+optionally track_id and mass; ``sim_node``'s ``particle_states`` has this layout) and
+``cone_state`` (sensor_msgs/JointState, joint ``cone``: the measured speed). It publishes
+
+- ``twin/pieces`` (PointCloud2: each piece's position, spread, most likely channel, its
+  probability and the time to its exit),
+- ``twin/channel_forecast`` (Float64MultiArray: per horizon and channel, the expected mass
+  and its spread, kg),
+- ``twin/parameters`` (Float64MultiArray: d, its spread, mu_C, its spread),
+- ``/diagnostics`` (the NIS against its degrees of freedom, the association rate, the
+  ensemble's spread, the real-time factor, the latency from a frame's arrival to its
+  publication, and the state: following, open loop or lost),
+
+and records them with its inputs to MCAP (``record_path``). The model is sim_node's
+(``parameter_file``, ``model.*``, ``solver.*``), so a parameter file made for sim_node with
+the key ``/**:`` serves both. The twin itself is :class:`~..twin.live.Follower`; this node
+only turns messages into its inputs and its results into messages. A refused input (a
+coordinate that is not finite, a frame of more than 10,000 points, a wrong frame_id, a stamp
+from the future, a joint of another name) is logged in one line and the twin goes on.
+"""
+
+from dataclasses import replace
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from .diagnostics import diagnostic_status
+from .guarded_node import GuardedNode, run_node
+from .outputs import Outputs
+from .parameters import declare, model_from_values, parameter_specs, ParamSpec, \
+    warn_unknown_parameters
+from .recording import NodeRecording
+from ..errors import ConeFeederError, TwinError
+from ..formats.cdr import CdrCodec
+from ..formats.messages import header, stamp
+from ..formats.parameter_file import load_model_params
+from ..formats.pointcloud import cloud_points
+from ..formats.runlog import run_metadata
+from ..formats.topics import TWIN_TOPICS
+from ..physics.params import Limit, SolverParams
+from ..physics.simulation import SimParams
+from ..twin.estimator import TwinSettings
+from ..twin.frames import cone_speed, detection_frame, MAX_FUTURE
+from ..twin.live import Follower, LiveSettings
+from ..twin.messages import channel_forecast_message, parameters_message, pieces_message
+
+__all__ = ['main', 'TwinNode']
+
+#: The twin's own parameters (the model, solver and recording ones are sim_node's).
+TWIN_PARAMETERS = (
+    ParamSpec('members', 16, 'ensemble size M (simulations the twin runs side by side)',
+              limit=Limit(2, 10_000, '')),
+    ParamSpec('sigma', 0.002, "the detections' noise (m, each of x and y)",
+              limit=Limit(0.0, 1.0, 'm', lo_open=True)),
+    ParamSpec('d_spread', 0.5, "the prior's relative spread of d (log scale)",
+              limit=Limit(0.0, 10.0, '')),
+    ParamSpec('mu_C_spread', 0.05, "the prior's spread of mu_C", limit=Limit(0.0, 5.0, '')),
+    ParamSpec('horizons', [0.5, 1.0, 2.0], 'forecast horizons (s)'),
+    ParamSpec('forecast_period', 0.1, 's of stream time between forecasts',
+              limit=Limit(0.0, 3600.0, 's', lo_open=True)),
+    ParamSpec('open_loop_after', 1.0, 's without a frame after which the twin goes on open '
+              'loop', limit=Limit(0.0, 3600.0, 's', lo_open=True)),
+    ParamSpec('death_after', 1.0, 'a piece not seen for this long (s) is dropped',
+              limit=Limit(0.0, 3600.0, 's', lo_open=True)),
+    ParamSpec('loosen', 10.0, "the solver's tolerances times this for the members",
+              limit=Limit(1.0, 1.0e6, '')),
+    ParamSpec('seed', 0, "the ensemble's seed", limit=Limit(0, 2 ** 31 - 1, '')),
+)
+#: sim_node's parameters that mean the same here.
+SHARED = ('parameter_file', 'frame_id', 'diagnostics.period', 'record_path',
+          'record_compression', 'record_max_file_size', 'record_max_file_duration',
+          'record_min_free_space')
+
+
+def twin_parameter_specs(base: Any = None) -> list[ParamSpec]:
+    """Return every parameter of the node: its own, sim_node's shared, model and solver."""
+    specs = []
+    for spec in parameter_specs(base):
+        if spec.name == 'record_path':
+            spec = replace(spec, default=spec.default.replace('sim_node', 'twin_node'))
+        if spec.name in SHARED or spec.name.startswith(('model.', 'solver.')):
+            specs.append(spec)
+    return list(TWIN_PARAMETERS) + specs
+
+
+class TwinNode(GuardedNode):
+    """Follow a feeder from its detections; see the module documentation."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        """Declare the parameters, build the twin, create the topics and the recording."""
+        super().__init__('twin_node', **kwargs)
+
+    def _setup(self) -> None:
+        specs = {s.name: s for s in twin_parameter_specs()}
+        file_param = declare(self, specs['parameter_file']).value
+        base = load_model_params(file_param or None)
+        values: dict[str, Any] = {'parameter_file': file_param}
+        for spec in twin_parameter_specs(base):
+            if spec.name != 'parameter_file':
+                values[spec.name] = declare(self, spec).value
+        warn_unknown_parameters(self)
+        horizons = tuple(float(h) for h in values['horizons'])
+        if not horizons or not all(0.0 < h <= 60.0 for h in horizons):
+            raise TwinError(f'horizons must be numbers in (0, 60] s, got {list(horizons)}')
+        model = model_from_values(values, base)
+        solver = SolverParams(**{name[len('solver.'):]: value for name, value in values.items()
+                                 if name.startswith('solver.')})
+        settings = TwinSettings(
+            members=int(values['members']), sigma=float(values['sigma']), d=model.product.d,
+            d_spread=float(values['d_spread']), mu_C=model.product.mu_C,
+            mu_C_spread=float(values['mu_C_spread']), death_after=float(values['death_after']),
+            seed=int(values['seed']), loosen=float(values['loosen']))
+        self._model = model
+        self._follower = Follower(SimParams(model=model, solver=solver), LiveSettings(
+            twin=settings, horizons=horizons, forecast_period=float(values['forecast_period']),
+            open_loop_after=float(values['open_loop_after'])))
+        self._frame_id = str(values['frame_id'])
+        self._codec = CdrCodec()
+        self._outputs = Outputs(self, self._codec, TWIN_TOPICS)
+        self._pub = {name: self._outputs.publisher(name) for name, spec in TWIN_TOPICS.items()
+                     if spec.direction == 'out'}
+        self._outputs.subscription('detections', self._on_detections)
+        self._outputs.subscription('cone_state', self._on_cone_state)
+        self._newest: tuple[float, float] | None = None  # (stamp s, monotonic s) of it
+        self._latencies: list[float] = []
+        self._arrivals: dict[float, int] = {}  # a waiting frame's stamp (s): arrival (ns)
+        self._published_outlook: Any = None
+        self._refused = 0
+        self._recording = NodeRecording(values, self._outputs.topics(), lambda: run_metadata(
+            values, 'twin_node', self._outputs.names, self._outputs.input_topics(),
+            node=self.get_fully_qualified_name(), namespace=self.get_namespace()))
+        if self._recording.recorder is not None:
+            self._outputs.add_hook(self._recording.recorder.hook)
+            self.get_logger().info(f'recording to {self._recording.path}')
+        self.create_timer(float(values['diagnostics.period']), self._publish_diagnostics)
+        self.get_logger().info(
+            f'following with {settings.members} members, forecasts every '
+            f"{values['forecast_period']:g} s over {', '.join(f'{h:g}' for h in horizons)} s")
+
+    # ------------------------------------------------------------------ inputs
+
+    def _latest(self) -> float | None:
+        """Return the newest accepted stamp plus the wall time since (s), None: none yet."""
+        if self._newest is None:
+            return None
+        return self._newest[0] + time.monotonic() - self._newest[1]
+
+    def _took(self, t: float) -> None:
+        if self._newest is None or t >= self._newest[0]:
+            self._newest = (t, time.monotonic())
+
+    def _refuse(self, text: str) -> None:
+        self._refused += 1
+        self.get_logger().warning(text, throttle_duration_sec=1.0)
+
+    def _on_cone_state(self, data: bytes, info: Any = None) -> None:
+        """Take the measured cone speed: frames that waited for it go on; open loop."""
+        msg = self._codec.decode('sensor_msgs/msg/JointState', data, strict=False)
+        t = _seconds(msg['header']['stamp'])
+        self._outputs.received('cone_state', data, round(t * 1e9))
+        latest = self._latest()
+        before = self._follower.outlook
+        try:
+            if latest is not None and t > latest + MAX_FUTURE:
+                raise TwinError(f'cone speed at t = {t:.4f} s refused: a stamp from the future '
+                                f'({t - latest:.3f} s ahead of the newest input)')
+            omega = cone_speed(t, list(msg['name']), [float(v) for v in msg['velocity']])
+            taken = self._follower.cone_speed(t, omega)
+        except (TwinError, ValueError) as exc:
+            self._refuse(str(exc))
+            return
+        self._took(t)
+        if taken or self._follower.outlook is not before:
+            self._publish(taken)
+
+    def _on_detections(self, data: bytes, info: Any = None) -> None:
+        """Take a frame of detections: check it, hand it to the twin, publish what it did."""
+        try:
+            msg = self._codec.decode('sensor_msgs/msg/PointCloud2', data, strict=False)
+            t = _seconds(msg['header']['stamp'])
+            self._outputs.received('detections', data, round(t * 1e9))
+            found = detection_frame(t, cloud_points(msg), msg['header']['frame_id'],
+                                    self._frame_id, self._latest())
+            if info is not None and info.get('received_timestamp'):
+                self._arrivals[t] = int(info['received_timestamp'])
+            taken = self._follower.frame(found)
+        except (ConeFeederError, ValueError) as exc:
+            self._refuse(str(exc))
+            return
+        self._took(t)
+        if taken:
+            self._publish(taken)
+
+    # ------------------------------------------------------------------ outputs
+
+    def _publish(self, taken: list[float]) -> None:
+        """Publish the twin's pieces, parameters and a new forecast (the frames taken)."""
+        twin = self._follower.twin
+        t = twin.t
+        ns = round(t * 1e9)
+        head = header(t, self._frame_id)
+        ids, mean, covariance = twin.pieces()
+        masses = np.array([twin.masses[int(i)] for i in ids], dtype=float)
+        outlook = self._follower.outlook
+        self._outputs.publish(self._pub['twin/pieces'], pieces_message(
+            head, self._model, ids, mean, covariance, masses, outlook), ns)
+        if outlook is not None and outlook is not self._published_outlook:
+            self._published_outlook = outlook
+            self._outputs.publish(self._pub['twin/channel_forecast'],
+                                  channel_forecast_message(outlook), ns)
+        self._outputs.publish(self._pub['twin/parameters'],
+                              parameters_message(twin.parameters()), ns)
+        now = time.time_ns()
+        for stamp_s in taken:
+            arrival = self._arrivals.pop(stamp_s, None)
+            if arrival is not None:
+                self._latencies.append((now - arrival) * 1e-9)
+
+    def _publish_diagnostics(self) -> None:
+        figures = self._follower.figures()
+        t = self._follower.t
+        state = self._follower.state(self._latest())
+        latencies = np.array(self._latencies or [np.nan])
+        self._latencies = []
+        values = {
+            'state': state,
+            'frames': str(figures['frames']),
+            'forecasts': str(figures['forecasts']),
+            'NIS': f"{figures['nis']:.4g}",
+            'NIS degrees of freedom': str(figures['observed']),
+            'association rate': f"{figures['association']:.3f}",
+            'real-time factor (capacity)': f"{figures['rtf']:.3g}",
+            'latency p95 (ms)': f'{1e3 * np.percentile(latencies, 95):.1f}',
+            'latency max (ms)': f'{1e3 * np.max(latencies):.1f}',
+            'inputs refused': str(self._refused),
+        }
+        if self._follower.twin is not None:
+            ids, _, covariance = self._follower.twin.pieces()
+            spread = np.sqrt(np.trace(covariance, axis1=1, axis2=2)) if len(ids) else [np.nan]
+            values['pieces'] = str(len(ids))
+            values['ensemble spread median (mm)'] = f'{1e3 * float(np.median(spread)):.3g}'
+            for key, (estimate, sd) in self._follower.twin.parameters().items():
+                values[key] = f'{estimate:.5g} +- {sd:.2g}'
+        level = 0 if state == 'following' else 1
+        status = diagnostic_status(level, f'{self.get_fully_qualified_name()}: twin', state,
+                                   values)
+        message = {'header': {'stamp': stamp(t or 0.0), 'frame_id': ''}, 'status': [status]}
+        self._outputs.publish(self._pub['/diagnostics'], message, round((t or 0.0) * 1e9))
+
+    def destroy_node(self) -> None:
+        """Close the recording (with its totals), then destroy the node's handles."""
+        try:
+            recording = getattr(self, '_recording', None)
+            if recording is not None:
+                closed = recording.close({'inputs_refused': str(self._refused)})
+                if closed is not None:
+                    self.log_at_exit(*closed)
+        finally:
+            super().destroy_node()
+
+
+def _seconds(value: Any) -> float:
+    return value['sec'] + value['nanosec'] * 1e-9
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the twin until shut down; return the process exit status."""
+    return run_node(TwinNode, 'twin_node', args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

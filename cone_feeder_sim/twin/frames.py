@@ -1,0 +1,105 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+What the twin accepts as a frame of detections and as a cone speed: the checks, written once.
+
+Both the headless twin (:mod:`.run`) and ``twin_node`` pass their inputs through these
+functions; a refused input raises :class:`~..errors.TwinError` with one line that names the
+problem, and the caller logs it and goes on.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from ..errors import TwinError
+
+__all__ = ['cone_speed', 'DetectionFrame', 'detection_frame', 'MAX_DETECTIONS',
+           'MAX_FUTURE']
+
+#: The most detections a frame may hold; a larger frame is refused.
+MAX_DETECTIONS = 10_000
+#: How far (s) a stamp may be ahead of the newest input's stamp plus the wall time since.
+MAX_FUTURE = 1.0
+
+
+@dataclass(frozen=True)
+class DetectionFrame:
+    """
+    One accepted frame: t (s); xy (k, 2) positions in the feeder frame (m).
+
+    masses: (k,) kg (NaN: not given) or None (none given): the product's mean mass;
+    track_ids: (k,) or None (not given).
+    """
+
+    t: float
+    xy: np.ndarray
+    masses: np.ndarray | None
+    track_ids: np.ndarray | None
+
+
+def detection_frame(t: float, points: np.ndarray, frame_id: str = 'feeder',
+                    expected_frame: str = 'feeder',
+                    latest: float | None = None) -> DetectionFrame:
+    """
+    Check a frame of detections and return it; raise TwinError naming what is wrong.
+
+    points: a structured array with fields x, y (m) and optionally z, track_id, mass (a
+    PointCloud2's points, or the rows of a CSV frame); frame_id: the frame it is in;
+    latest: the newest stamp accepted so far plus the wall time since (s), None: no check
+    of a stamp from the future.
+    """
+    names = points.dtype.names or ()
+    if frame_id != expected_frame:
+        raise TwinError(f'frame at t = {t:.4f} s refused: frame_id {frame_id!r}, not '
+                        f'{expected_frame!r}')
+    if not math.isfinite(t):
+        raise TwinError(f'frame refused: its stamp {t} is not finite')
+    if latest is not None and t > latest + MAX_FUTURE:
+        raise TwinError(f'frame at t = {t:.4f} s refused: a stamp from the future '
+                        f'({t - latest:.3f} s ahead of the newest input)')
+    if 'x' not in names or 'y' not in names:
+        raise TwinError(f'frame at t = {t:.4f} s refused: no x and y fields (it has '
+                        f'{", ".join(names) or "none"})')
+    if len(points) > MAX_DETECTIONS:
+        raise TwinError(f'frame at t = {t:.4f} s refused: {len(points)} detections, more than '
+                        f'{MAX_DETECTIONS}')
+    xy = np.column_stack([points['x'], points['y']]).astype(float)
+    if not np.isfinite(xy).all():
+        raise TwinError(f'frame at t = {t:.4f} s refused: a detection is not finite')
+    masses = None
+    if 'mass' in names:
+        masses = np.asarray(points['mass'], dtype=float)
+        given = ~np.isnan(masses)  # NaN: not given, the product's mean mass
+        if not given.any():
+            masses = None
+        elif not (np.isfinite(masses[given]).all() and (masses[given] > 0.0).all()):
+            raise TwinError(f'frame at t = {t:.4f} s refused: a mass that is not a positive '
+                            f'number')
+    track_ids = np.asarray(points['track_id']) if 'track_id' in names else None
+    return DetectionFrame(t=float(t), xy=xy, masses=masses, track_ids=track_ids)
+
+
+def cone_speed(t: float, names: list[str], velocities: list[float],
+               joint: str = 'cone') -> float:
+    """Return the joint's speed (rad/s) from a JointState's names and velocities."""
+    if joint not in names:
+        raise TwinError(f'cone speed at t = {t:.4f} s refused: no joint {joint!r} (joints: '
+                        f'{", ".join(map(repr, names)) or "none"})')
+    k = names.index(joint)
+    if k >= len(velocities) or not math.isfinite(velocities[k]):
+        raise TwinError(f'cone speed at t = {t:.4f} s refused: joint {joint!r} has no finite '
+                        f'velocity')
+    return float(velocities[k])

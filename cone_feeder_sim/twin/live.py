@@ -1,0 +1,193 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+A twin fed as a live feeder reports: frame by frame, forecasts on a schedule, its state.
+
+:class:`Follower` is what ``twin_node`` runs, without ROS: the twin is made at the first
+input (its time starts at that stamp), each accepted frame is analysed
+(:meth:`.estimator.Twin.update`), a forecast is made when ``forecast_period`` s of stream
+time have passed since the last, and a cone speed that arrives while no frame has come for
+``open_loop_after`` s moves the twin on by itself (open loop: the forecasts go on from the
+model alone). Its state is one of
+
+- ``waiting``: no input yet;
+- ``following``: frames arrive and most detections are associated;
+- ``open loop``: no frame for ``open_loop_after`` s;
+- ``lost``: frames arrive but fewer than half of the last second's detections were
+  associated (the twin's pieces are not where the camera sees them).
+"""
+
+from collections import deque
+from dataclasses import dataclass
+import math
+import time
+from typing import Any
+
+from .estimator import Frame, Twin, TwinSettings
+from .forecast import Forecast, forecast
+from .frames import DetectionFrame
+from ..physics.simulation import SimParams
+
+__all__ = ['Follower', 'LiveSettings', 'STATES']
+
+#: The follower's states, as diagnostics name them.
+STATES = ('waiting', 'following', 'open loop', 'lost')
+
+
+@dataclass(frozen=True)
+class LiveSettings:
+    """The estimator's settings, the forecasts' horizons (s) and period (s), open loop (s)."""
+
+    twin: TwinSettings = TwinSettings()
+    horizons: tuple[float, ...] = (0.5, 1.0, 2.0)
+    forecast_period: float = 0.1
+    open_loop_after: float = 1.0
+
+
+class Follower:
+    """A twin fed frame by frame (see the module)."""
+
+    def __init__(self, params: SimParams, settings: LiveSettings = LiveSettings()) -> None:
+        """Wait for the first input."""
+        self.params, self.settings = params, settings
+        self.twin: Twin | None = None
+        self.last_frame: float | None = None
+        self.outlook: Forecast | None = None
+        #: what the last analysed frame did
+        self.last: Frame | None = None
+        self._waiting: list[DetectionFrame] = []
+        self._cone_t = -math.inf
+        self._due = 0.0
+        #: per frame of the last second: (t, detections, associated)
+        self._recent: deque[tuple[float, int, int]] = deque()
+        #: counters since the last :meth:`figures` call
+        self._window = {'frames': 0, 'nis': 0.0, 'observed': 0, 'detections': 0,
+                        'associated': 0, 'busy': 0.0, 'stream': 0.0, 'forecasts': 0}
+
+    @property
+    def t(self) -> float | None:
+        """Return the twin's time (s), None before the first input."""
+        return None if self.twin is None else self.twin.t
+
+    def _start(self, t: float) -> Twin:
+        if self.twin is None:
+            self.twin = Twin(self.params, self.settings.twin, t0=t)
+            self._due = t
+        return self.twin
+
+    def cone_speed(self, t: float, omega: float) -> list[float]:
+        """
+        Take a measured cone speed (rad/s) at t (s); return the stamps of the frames taken.
+
+        Frames that waited for the speed at their stamp are analysed now; in open loop the
+        twin moves on to t by itself. Raises ValueError for a speed out of order or not
+        finite.
+        """
+        twin = self._start(t)
+        twin.cone_speed(t, omega)
+        self._cone_t = t
+        taken = self._take(lambda waiting: waiting.t <= t)
+        if taken or self.state(t) != 'open loop' or t <= twin.t:
+            return taken
+        start = time.perf_counter()
+        before = twin.t
+        twin.predict(t)
+        self._window['stream'] += t - before
+        self._forecast_if_due(t)
+        self._window['busy'] += time.perf_counter() - start
+        return taken
+
+    def frame(self, found: DetectionFrame) -> list[float]:
+        """
+        Take a frame; return the stamps of the frames analysed now.
+
+        A frame waits for the cone speed measured at or after its stamp (the encoder's
+        reading of the same instant may arrive just after it): without it the members would
+        turn the cone at the speed of the frame before. A newer frame releases the frames
+        that still wait (no encoder: they go on the last speed measured).
+        """
+        self._start(found.t)
+        taken = self._take(lambda waiting: True)
+        self._waiting.append(found)
+        return taken + self._take(lambda waiting: waiting.t <= self._cone_t)
+
+    def _take(self, ready: Any) -> list[float]:
+        taken = []
+        while self._waiting and ready(self._waiting[0]):
+            found = self._waiting.pop(0)
+            self._analyse(found)
+            taken.append(found.t)
+        return taken
+
+    def _analyse(self, found: DetectionFrame) -> Frame:
+        """Analyse a frame; make the forecast if one is due."""
+        twin = self.twin
+        start = time.perf_counter()
+        before = twin.t
+        done = twin.update(found.t, found.xy, found.masses)
+        self.last_frame = found.t
+        self.last = done
+        window = self._window
+        window['stream'] += found.t - before
+        window['frames'] += 1
+        window['nis'] += done.nis
+        window['observed'] += done.observed
+        window['detections'] += len(found.xy)
+        window['associated'] += done.associated
+        self._recent.append((found.t, len(found.xy), done.associated))
+        while self._recent and self._recent[0][0] < found.t - 1.0:
+            self._recent.popleft()
+        self._forecast_if_due(found.t)
+        window['busy'] += time.perf_counter() - start
+        return done
+
+    def _forecast_if_due(self, t: float) -> Forecast | None:
+        if t + 1e-9 < self._due or self.twin is None:
+            return None
+        self.outlook = forecast(self.twin, self.settings.horizons)
+        self._window['forecasts'] += 1
+        period = self.settings.forecast_period
+        while self._due <= t + 1e-9:
+            self._due += period
+        return self.outlook
+
+    def state(self, t: float | None = None) -> str:
+        """Return the state at stream time t (default: the twin's time)."""
+        if self.twin is None:
+            return 'waiting'
+        t = self.twin.t if t is None else t
+        if self.last_frame is None or t - self.last_frame > self.settings.open_loop_after:
+            return 'open loop'
+        seen = sum(k for _, k, _ in self._recent)
+        if seen and 2 * sum(a for _, _, a in self._recent) < seen:
+            return 'lost'
+        return 'following'
+
+    def figures(self) -> dict[str, float]:
+        """
+        Return the figures since the last call, and start a new window.
+
+        frames, forecasts; nis and observed (its degrees of freedom); association (the share
+        of detections associated); rtf: stream seconds taken per second of computing (at
+        least 1: the twin keeps up with a live stream); busy (s of computing).
+        """
+        w = self._window
+        out = {'frames': w['frames'], 'forecasts': w['forecasts'], 'nis': w['nis'],
+               'observed': w['observed'], 'busy': w['busy'],
+               'association': (w['associated'] / w['detections'] if w['detections']
+                               else float('nan')),
+               'rtf': w['stream'] / w['busy'] if w['busy'] > 0.0 else float('inf')}
+        for key in w:
+            w[key] = 0.0 if isinstance(w[key], float) else 0
+        return out

@@ -1,0 +1,178 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""twin_node in process: a simulated plant's detections in, the twin's estimates out."""
+
+from pathlib import Path
+import time
+from typing import Any
+
+from cone_feeder_sim.formats.cdr import CdrCodec
+from cone_feeder_sim.formats.mcap_reader import open_recording, parse_run_source
+from cone_feeder_sim.formats.messages import cloud_message, cone_state_message, header
+from cone_feeder_sim.formats.pointcloud import cloud_points, STATE_DTYPE
+from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.rotation import RotationProfile
+from cone_feeder_sim.physics.simulation import (
+    add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
+from cone_feeder_sim.ros.twin_node import TwinNode
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState, PointCloud2
+from std_msgs.msg import Float64MultiArray
+
+MODEL = ModelParams()
+PARAMS = SimParams(model=MODEL)
+PROFILE = RotationProfile.from_table([[0.0, 0.0], [0.5, 6.0]])
+PLACES = [[0.10, 0.02], [-0.08, 0.09], [0.03, -0.13], [-0.12, -0.05]]
+CODEC = CdrCodec()
+
+
+class Plant:
+    """The physics core as the feeder, and a client node that is its camera and encoder."""
+
+    def __init__(self, context: Any, twin: TwinNode) -> None:
+        q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in PLACES])
+        self.state, _ = add_particles(SimState(), PARAMS, q)
+        self.rng = np.random.default_rng(0)
+        self.node = Node('camera', context=context)
+        self.detections = self.node.create_publisher(PointCloud2, 'detections', 10)
+        self.cone = self.node.create_publisher(JointState, 'cone_state', 10)
+        self.received: dict[str, list] = {'pieces': [], 'forecast': [], 'parameters': [],
+                                          'diagnostics': []}
+        for kind, topic, msg_type in (('pieces', 'twin/pieces', PointCloud2),
+                                      ('forecast', 'twin/channel_forecast', Float64MultiArray),
+                                      ('parameters', 'twin/parameters', Float64MultiArray),
+                                      ('diagnostics', '/diagnostics', DiagnosticArray)):
+            self.node.create_subscription(msg_type, topic, self.received[kind].append, 10)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.executor.add_node(twin)
+
+    def spin_until(self, condition: Any, seconds: float = 30.0) -> bool:
+        end = time.monotonic() + seconds
+        while not condition():
+            if time.monotonic() > end:
+                return False
+            self.executor.spin_once(timeout_sec=0.05)
+        return True
+
+    def truth(self) -> np.ndarray:
+        seen, _, _ = world_from_cone(self.state.y, self.state.angle, PROFILE.omega(self.state.t))
+        return seen
+
+    def frame(self, t: float, **bad: Any) -> None:
+        """Move the plant to t, publish the cone speed and (after it) the frame of t."""
+        self.state = advance(self.state, PARAMS, PROFILE, t).state
+        self.cone.publish(CODEC.encode('sensor_msgs/msg/JointState', cone_state_message(
+            header(t, 'feeder'), self.state.angle, PROFILE.omega(t))))
+        seen = self.truth()
+        points = np.zeros(len(seen), dtype=STATE_DTYPE)
+        points['x'] = seen[:, 0] + self.rng.normal(0.0, 0.001, len(seen))
+        points['y'] = seen[:, 1] + self.rng.normal(0.0, 0.001, len(seen))
+        points['z'] = seen[:, 2]
+        points['id'] = self.state.ids
+        points['mass'] = np.nan
+        self.detections.publish(CODEC.encode('sensor_msgs/msg/PointCloud2',
+                                             cloud_message(header(t, 'feeder'), points)))
+
+
+def twin_node(context: Any, tmp_path: Path, **overrides: Any) -> TwinNode:
+    values = {'members': 8, 'sigma': 0.001, 'd_spread': 0.05, 'mu_C_spread': 0.01,
+              'diagnostics.period': 0.2, 'record_path': str(tmp_path / 'twin.mcap'),
+              **overrides}
+    return TwinNode(context=context, parameter_overrides=[
+        Parameter(k, value=v) for k, v in values.items()])
+
+
+def test_the_twin_follows_the_plant_and_forecasts(context: Any, tmp_path: Path) -> None:
+    twin = twin_node(context, tmp_path)
+    plant = Plant(context, twin)
+    try:
+        for k in range(1, 31):
+            t = k / 30.0
+            plant.frame(t)
+            assert plant.spin_until(lambda k=k: len(plant.received['pieces']) >= k), k
+        last = cloud_points(plant.received['pieces'][-1])
+        truth = plant.truth()
+        assert len(last) == len(truth)
+        error = np.hypot(last['x'][:, None] - truth[None, :, 0],
+                         last['y'][:, None] - truth[None, :, 1]).min(axis=1)
+        assert error.max() < 0.005
+        assert (last['sigma_x'] > 0).all() and (last['sigma_x'] < 0.005).all()
+        assert plant.received['forecast'] and plant.received['parameters']
+        forecast = plant.received['forecast'][-1]
+        assert [d.size for d in forecast.layout.dim] == [3, MODEL.channels.count, 2]
+        assert np.all(np.array(forecast.data) >= 0.0)
+        assert plant.spin_until(lambda: any(
+            m.status[0].message == 'following' for m in plant.received['diagnostics']))
+    finally:
+        plant.executor.shutdown()
+        twin.destroy_node()
+        plant.node.destroy_node()
+    recording = open_recording(parse_run_source(str(tmp_path / 'twin.mcap')))
+    topics = recording.topics
+    assert topics['/detections'].message_count == 30
+    assert topics['/cone_state'].message_count == 30
+    assert topics['/twin/pieces'].message_count == 30
+
+
+def test_bad_inputs_are_refused_and_the_twin_goes_on(context: Any, tmp_path: Path) -> None:
+    twin = twin_node(context, tmp_path, record_path='')
+    plant = Plant(context, twin)
+    logged: list[str] = []
+    original = twin._refuse  # every refusal is logged through it: count them here
+
+    def refuse(text: str) -> None:
+        logged.append(text)
+        original(text)
+
+    twin._refuse = refuse  # type: ignore[method-assign]
+    try:
+        for k in range(1, 6):
+            plant.frame(k / 30.0)
+            assert plant.spin_until(lambda k=k: len(plant.received['pieces']) >= k)
+        publish = plant.detections.publish
+
+        def cloud(t: float, points: np.ndarray, frame_id: str = 'feeder') -> None:
+            publish(CODEC.encode('sensor_msgs/msg/PointCloud2',
+                                 cloud_message(header(t, frame_id), points)))
+
+        good = np.zeros(2, dtype=STATE_DTYPE)
+        good['x'], good['y'] = [0.1, -0.08], [0.02, 0.09]
+        nan = good.copy()
+        nan['x'][0] = np.nan
+        cloud(0.2, nan)
+        cloud(0.2, good, frame_id='camera')
+        cloud(50.0, good)
+        cloud(0.2, np.zeros(10_001, dtype=STATE_DTYPE))
+        plant.cone.publish(CODEC.encode('sensor_msgs/msg/JointState', {
+            'header': header(0.2, 'feeder'), 'name': ['belt'], 'position': np.zeros(1),
+            'velocity': np.zeros(1), 'effort': np.zeros(0)}))
+        assert plant.spin_until(lambda: len(logged) >= 5)
+        assert any('not finite' in line for line in logged)
+        assert any("frame_id 'camera'" in line for line in logged)
+        assert any('from the future' in line for line in logged)
+        assert any('10001 detections' in line for line in logged)
+        assert any("no joint 'cone'" in line for line in logged)
+        count = len(plant.received['pieces'])
+        plant.frame(6 / 30.0)
+        assert plant.spin_until(lambda: len(plant.received['pieces']) > count)
+    finally:
+        plant.executor.shutdown()
+        twin.destroy_node()
+        plant.node.destroy_node()
