@@ -70,7 +70,8 @@ __all__ = ['main', 'TwinNode']
 
 #: The twin's own parameters (the model, solver and recording ones are sim_node's).
 TWIN_PARAMETERS = (
-    ParamSpec('members', 16, 'ensemble size M (simulations the twin runs side by side)',
+    ParamSpec('members', 8, 'ensemble size M (simulations the twin runs side by side; 8 '
+              'keeps up with 30 pieces at 30 frames/s on 2 cores, doc/twin.md)',
               limit=Limit(2, 10_000, '')),
     ParamSpec('sigma', 0.002, "the detections' noise (m, each of x and y)",
               limit=Limit(0.0, 1.0, 'm', lo_open=True)),
@@ -78,7 +79,8 @@ TWIN_PARAMETERS = (
               limit=Limit(0.0, 10.0, '')),
     ParamSpec('mu_C_spread', 0.05, "the prior's spread of mu_C", limit=Limit(0.0, 5.0, '')),
     ParamSpec('horizons', [0.5, 1.0, 2.0], 'forecast horizons (s)'),
-    ParamSpec('forecast_period', 0.1, 's of stream time between forecasts',
+    ParamSpec('forecast_period', 0.5, 's of stream time between forecasts (each costs M '
+              'simulations over the longest horizon)',
               limit=Limit(0.0, 3600.0, 's', lo_open=True)),
     ParamSpec('open_loop_after', 1.0, 's without a frame after which the twin goes on open '
               'loop', limit=Limit(0.0, 3600.0, 's', lo_open=True)),
@@ -175,7 +177,7 @@ class TwinNode(GuardedNode):
         self._refused += 1
         self.get_logger().warning(text, throttle_duration_sec=1.0)
 
-    def _on_cone_state(self, data: bytes, info: Any = None) -> None:
+    def _on_cone_state(self, data: bytes, info: Any) -> None:
         """Take the measured cone speed: frames that waited for it go on; open loop."""
         msg = self._codec.decode('sensor_msgs/msg/JointState', data, strict=False)
         t = _seconds(msg['header']['stamp'])
@@ -195,7 +197,7 @@ class TwinNode(GuardedNode):
         if taken or self._follower.outlook is not before:
             self._publish(taken)
 
-    def _on_detections(self, data: bytes, info: Any = None) -> None:
+    def _on_detections(self, data: bytes, info: Any) -> None:
         """Take a frame of detections: check it, hand it to the twin, publish what it did."""
         try:
             msg = self._codec.decode('sensor_msgs/msg/PointCloud2', data, strict=False)

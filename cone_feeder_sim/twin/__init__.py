@@ -21,6 +21,8 @@ optimal assignment) and ``estimator`` (``Twin``: an ensemble of the physics core
 following detections, births, deaths and exits, d and mu_C as augmented state) and
 ``forecast`` (each piece's channel probabilities and exit time, each channel's mass over
 the horizons, from the members), ``spec`` and ``run`` (the headless ``cone-feeder-sim twin``
-over recorded CSV streams). Still to come: late detections re-run from their stamp, MCAP
-streams, the report and ``twin_node``. No ROS here.
+over recorded CSV streams), ``frames`` (the inputs' checks), ``live`` (``Follower``: the
+twin frame by frame, as ``twin_node`` runs it) and ``messages`` (its estimates as standard
+messages). Still to come: on-line identification that works, late detections re-run from
+their stamp, MCAP streams, the report. No ROS here.
 """
