@@ -29,7 +29,8 @@ detections the estimator
    the covariances the ensemble carries, so that the parameters are re-identified on line;
 3. adds a piece for each detection left over (a birth: resting on the cone where it was
    seen, spread by the detection noise over the members) and drops pieces not seen for
-   ``death_after`` s (deaths) and pieces that left the cone in most members (exits).
+   ``death_after`` s, and the younger of two pieces within the gate of each other (deaths),
+   and pieces that left the cone in most members (exits).
 
 Detections are world-frame positions; the cone axes turn with the cone by the angle all
 members share, so a detection is turned into cone axes before the analysis (the noise is
@@ -41,8 +42,9 @@ import math
 
 import numpy as np
 
-from .association import associate
+from .association import associate, GATE_CHI2
 from .enkf import analyse
+from .particles import resample_parameters
 from ..physics.model import STATE_SIZE
 from ..physics.params import product_row, ProductParams
 from ..physics.rotation import rotate_z, RotationProfile
@@ -72,7 +74,13 @@ class TwinSettings:
     not seen for this long (s) is dropped; seed: the ensemble's and the perturbations' seed;
     loosen: the solver's tolerances (relative and absolute) are multiplied by this for the
     members: a twin corrected by detections with millimetres of noise needs no micrometre
-    accuracy (at 10, the default 1e-6 m in position becomes 1e-5 m; measured in doc/twin.md).
+    accuracy (at 10, the default 1e-6 m in position becomes 1e-5 m; measured in doc/twin.md);
+    window: d and mu_C are analysed once per window of this many seconds, against every
+    detection of the window at once (an ensemble smoother: each member run again from its
+    state at the window's start with its own parameters), instead of frame by frame; 0:
+    frame by frame, with the pieces' states; passes: the smoother's passes over a window
+    (ES-MDA, Emerick & Reynolds 2013: each with the noise's variance times passes; more
+    passes follow a model that is not linear in its parameters better).
     """
 
     members: int = 32
@@ -86,6 +94,8 @@ class TwinSettings:
     death_after: float = 1.0
     seed: int = 0
     loosen: float = 10.0
+    window: float = 0.5
+    passes: int = 1
 
 
 @dataclass(frozen=True)
@@ -135,6 +145,10 @@ class Twin:
         self.last_seen: dict[int, float] = {}
         self._exits: list[int] = []
         self._drifted = t0
+        self._window_t0 = t0
+        self._window_states = list(self.states)
+        #: the window's associated detections: (t, piece ids (k,), world x, y (k, 2))
+        self._window_frames: list[tuple[float, np.ndarray, np.ndarray]] = []
 
     @property
     def t(self) -> float:
@@ -159,7 +173,8 @@ class Twin:
         else:
             self.times.append(float(t))
             self.omegas.append(float(omega))
-        first = max(int(np.searchsorted(self.times, self.t, side='right')) - 1, 0)
+        keep = min(self.t, self._window_t0)  # the smoother runs the window again
+        first = max(int(np.searchsorted(self.times, keep, side='right')) - 1, 0)
         del self.times[:first], self.omegas[:first]
         self._profile = RotationProfile(np.array(self.times), np.array(self.omegas))
 
@@ -223,6 +238,8 @@ class Twin:
             nis, observed = self._analyse(ids, match.pairs, detections[:, :2])
             for piece, _ in match.pairs:
                 self.last_seen[int(ids[piece])] = t
+            self._window_frames.append((t, ids[match.pairs[:, 0]],
+                                        detections[match.pairs[:, 1], :2]))
         # a detection left over is a birth, unless it is within 3 sigma of the rim (a piece
         # leaving, or a false detection there: no member could hold it on the cone)
         rim = self.params.model.r - 3.0 * sigma
@@ -234,8 +251,36 @@ class Twin:
         dead = [i for i in ids.tolist()
                 if t - self.last_seen.get(i, t) > self.settings.death_after]
         self._drop(dead)
+        dead += self._merge()
+        if self.settings.window > 0.0 and t - self._window_t0 >= self.settings.window - 1e-9:
+            self._smooth()
+            self._window_t0, self._window_states, self._window_frames = t, self.states, []
         return Frame(t=t, associated=len(match.pairs), births=len(born), deaths=len(dead),
                      exits=exits, nis=nis, observed=observed)
+
+    def _merge(self) -> list[int]:
+        """
+        Drop the younger of two pieces within the gate of each other; return the dropped.
+
+        Two of the twin's pieces where the camera sees one (a piece the gate missed for a
+        frame is born again) would take its detections in turn, and neither would die.
+        """
+        ids, mean, spread = self.pieces()
+        noise = 2.0 * self.settings.sigma ** 2 * np.eye(2)
+        dropped: list[int] = []
+        for a in range(len(ids)):
+            if int(ids[a]) in dropped:
+                continue
+            diff = mean[a + 1:] - mean[a]
+            near = np.flatnonzero(np.hypot(diff[:, 0], diff[:, 1])
+                                  < 10.0 * self.settings.sigma + 1e-3)  # a cheap prefilter
+            for b in near + a + 1:
+                d = mean[b] - mean[a]
+                if int(ids[b]) not in dropped and d @ np.linalg.solve(
+                        spread[a] + spread[b] + noise, d) < GATE_CHI2:
+                    dropped.append(int(ids[b]))
+        self._drop(dropped)
+        return dropped
 
     def _common(self) -> np.ndarray:
         ids = self.states[0].ids
@@ -265,8 +310,9 @@ class Twin:
         values = np.concatenate([seen[:, 0], seen[:, 1]])
         sigma = np.full(len(columns), self.settings.sigma)
         result = analyse(ensemble, columns, values, sigma, self.rng)
-        self.log_d = np.clip(result.ensemble[:, width], *LOG_D_RANGE)
-        self.mu_c = np.clip(result.ensemble[:, width + 1], *MU_C_RANGE)
+        if self.settings.window <= 0.0:  # else the smoother analyses them, once a window
+            self.log_d = np.clip(result.ensemble[:, width], *LOG_D_RANGE)
+            self.mu_c = np.clip(result.ensemble[:, width + 1], *MU_C_RANGE)
         states = []
         for s, r, row in zip(self.states, rows, result.ensemble):
             y = s.y.copy()
@@ -274,6 +320,53 @@ class Twin:
             states.append(replace(s, y=y))
         self.states = [self._with_products(s, k) for k, s in enumerate(states)]
         return result.nis, result.observed
+
+    def _smooth(self) -> None:
+        """
+        Analyse d and mu_C against the window's detections at once (an ensemble smoother).
+
+        Each member runs again from its state at the window's start with its current d and
+        mu_C, without analyses; its positions of the pieces seen at each frame (those it
+        and every other member still hold) are its predicted observations. The analysis of
+        the augmented ensemble [log d, mu_C, predictions] against the detections moves the
+        parameters along their covariance with the predictions (Evensen & van Leeuwen 2000).
+        """
+        if not self._window_frames or not all(s.count for s in self._window_states):
+            return
+        predicted = self._window_predictions()
+        if predicted is None:
+            return
+        g, y = predicted
+        log_likelihood = -0.5 * np.sum((g - y) ** 2, axis=1) / self.settings.sigma ** 2
+        parameters, _ = resample_parameters(np.column_stack([self.log_d, self.mu_c]),
+                                            log_likelihood, self.rng)
+        self.log_d = np.clip(parameters[:, 0], *LOG_D_RANGE)
+        self.mu_c = np.clip(parameters[:, 1], *MU_C_RANGE)
+        self.states = [self._with_products(s, k) for k, s in enumerate(self.states)]
+
+    def _window_predictions(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """
+        Return the members' predictions of the window's detections (M, p) and those (p,).
+
+        Each member runs from its state at the window's start with its current parameters;
+        only the pieces every member still holds at a frame count. None: nothing to compare.
+        """
+        states = [self._with_products(s, k) for k, s in enumerate(self._window_states)]
+        m = len(states)
+        predicted, observed = [], []
+        for t, ids, xy in self._window_frames:
+            results = advance_many(states, self.params, [self._profile] * m, [t] * m)
+            states = [r.state for r in results]
+            held = ids[np.all([np.isin(ids, s.ids) for s in states], axis=0)]
+            if not len(held):
+                continue
+            omega = self._profile.omega(t)
+            predicted.append(np.stack([self._world(s, held, omega)[:, :2].ravel()
+                                       for s in states]))
+            observed.append(xy[np.isin(ids, held)].ravel())
+        if not observed:
+            return None
+        return np.concatenate(predicted, axis=1), np.concatenate(observed)
 
     def _product(self, member: int, mass: float) -> ProductParams:
         return replace(self.params.model.product, m=mass, d=float(np.exp(self.log_d[member])),

@@ -25,7 +25,8 @@ model alone). Its state is one of
 - ``following``: frames arrive and most detections are associated;
 - ``open loop``: no frame for ``open_loop_after`` s;
 - ``lost``: frames arrive but fewer than half of the last second's detections were
-  associated (the twin's pieces are not where the camera sees them).
+  associated with a piece or bore one (the twin's pieces are not where the camera sees
+  them, and the camera's are near the rim, where none is born).
 """
 
 from collections import deque
@@ -69,7 +70,7 @@ class Follower:
         self._waiting: list[DetectionFrame] = []
         self._cone_t = -math.inf
         self._due = 0.0
-        #: per frame of the last second: (t, detections, associated)
+        #: per frame of the last second: (t, detections, associated or born)
         self._recent: deque[tuple[float, int, int]] = deque()
         #: counters since the last :meth:`figures` call
         self._window = {'frames': 0, 'nis': 0.0, 'observed': 0, 'detections': 0,
@@ -145,7 +146,7 @@ class Follower:
         window['observed'] += done.observed
         window['detections'] += len(found.xy)
         window['associated'] += done.associated
-        self._recent.append((found.t, len(found.xy), done.associated))
+        self._recent.append((found.t, len(found.xy), done.associated + done.births))
         while self._recent and self._recent[0][0] < found.t - 1.0:
             self._recent.popleft()
         self._forecast_if_due(found.t)

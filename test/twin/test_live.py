@@ -1,0 +1,78 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""The twin frame by frame: a frame waits for its cone speed; the camera stops and returns."""
+
+from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.rotation import RotationProfile
+from cone_feeder_sim.physics.simulation import (
+    add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
+from cone_feeder_sim.twin.estimator import TwinSettings
+from cone_feeder_sim.twin.frames import DetectionFrame
+from cone_feeder_sim.twin.live import Follower, LiveSettings
+import numpy as np
+
+MODEL = ModelParams()
+PARAMS = SimParams(model=MODEL)
+PROFILE = RotationProfile.from_table([[0.0, 0.0], [0.5, 4.0], [2.0, 4.0], [2.5, -4.0]])
+PLACES = [[0.10, 0.02], [-0.08, 0.09], [0.03, -0.13], [-0.12, -0.05]]
+
+
+def test_the_camera_stops_the_twin_goes_on_open_loop_and_recovers() -> None:
+    rng = np.random.default_rng(0)
+    q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in PLACES])
+    plant, _ = add_particles(SimState(), PARAMS, q)
+    follower = Follower(PARAMS, LiveSettings(
+        twin=TwinSettings(members=8, sigma=0.001, d_spread=0.05, mu_C_spread=0.01),
+        forecast_period=0.25, open_loop_after=0.5))
+    states: dict[float, str] = {}
+    forecasts: list[float] = []
+    for k in range(1, 124):  # 4.1 s; the camera is off from 1.0 s to 2.5 s
+        t = k / 30.0
+        plant = advance(plant, PARAMS, PROFILE, t).state
+        seen, _, _ = world_from_cone(plant.y, plant.angle, PROFILE.omega(t))
+        camera = not 1.0 < t <= 2.5
+        if camera:  # the frame first: it waits for the encoder's reading of its instant
+            found = DetectionFrame(t, seen[:, :2] + rng.normal(0.0, 0.001, (plant.count, 2)),
+                                   None, None)
+            assert follower.frame(found) == []
+            assert follower.cone_speed(t, PROFILE.omega(t)) == [t]
+        else:
+            assert follower.cone_speed(t, PROFILE.omega(t)) == []
+        states[t] = follower.state(t)
+        if follower.outlook is not None and (not forecasts or follower.outlook.t > forecasts[-1]):
+            forecasts.append(follower.outlook.t)
+        if camera or states[t] == 'open loop':
+            assert follower.t == t  # else it waits: within open_loop_after of the last frame
+    assert states[30 / 30.0] == 'following'
+    assert states[44 / 30.0] == 'following'  # within open_loop_after of the last frame
+    assert all(state == 'open loop' for t, state in states.items() if 1.6 < t <= 2.5)
+    assert any(1.6 < t <= 2.5 for t in forecasts)  # forecasts go on from the model alone
+    assert all(state == 'following' for t, state in states.items() if t > 2.5)
+    # every piece found again; a piece that the reversal in the dark put outside the gate is
+    # born again, and its stale copy dies death_after (1 s) later (measured: one of four,
+    # at 2.77 s)
+    ids, mean, _ = follower.twin.pieces()
+    assert len(ids) == plant.count, (ids, plant.ids)
+    error = np.linalg.norm(mean[:, None, :] - seen[None, :, :2], axis=2).min(axis=1)
+    assert error.max() < 0.005
+    assert follower.last.associated == plant.count
+
+
+def test_a_frame_without_encoder_goes_on_when_the_next_one_comes() -> None:
+    follower = Follower(PARAMS, LiveSettings(twin=TwinSettings(members=4)))
+    first = DetectionFrame(0.1, np.array([[0.1, 0.0]]), None, None)
+    second = DetectionFrame(0.2, np.array([[0.1, 0.0]]), None, None)
+    assert follower.frame(first) == []
+    assert follower.frame(second) == [0.1]  # one frame late, on the last speed measured
+    assert follower.state() == 'following'
