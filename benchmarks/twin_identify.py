@@ -48,6 +48,8 @@ def reversing(speed: float) -> RotationProfile:
     return RotationProfile.from_table([[0.0, 0.0], [0.5, speed], [1.5, speed], [2.0, -speed],
                                        [3.5, -speed], [4.0, speed], [5.5, speed],
                                        [6.0, -speed]])
+
+
 TRUTHS = [{'d': 450.0, 'mu_C': 0.85}, {'d': 225.0, 'mu_C': 0.7}, {'d': 450.0, 'mu_C': 0.7},
           {'d': 100.0, 'mu_C': 1.0}]
 
