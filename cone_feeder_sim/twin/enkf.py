@@ -53,19 +53,14 @@ class Analysis:
 
 
 def analyse(ensemble: np.ndarray, columns: np.ndarray, values: np.ndarray, sigma: np.ndarray,
-            rng: np.random.Generator, threshold: float = 0.0) -> Analysis:
+            rng: np.random.Generator) -> Analysis:
     """
     Return the analysis of ensemble (M, d) against observed components.
 
     columns: (p,) int, the observed state components (H selects them); values: (p,) what was
     observed, in the components' units; sigma: (p,) the observations' noise standard
     deviations (same units); rng: draws the perturbations (seeded by the caller, so a run
-    replayed gives the same analysis); threshold: where the ensemble's correlation of a
-    component with an observation is below this in magnitude, their covariance is taken as
-    zero (correlation-based adaptive localisation, Luo, Bhakta & Naevdal 2018: with M
-    members a correlation of nothing is noise of about 1 / sqrt(M), and updates made of
-    such noise collapse the spread of what the observations do not inform). The forecast
-    ensemble is not changed.
+    replayed gives the same analysis). The forecast ensemble is not changed.
     """
     members = ensemble.shape[0]
     if members < 2:
@@ -83,12 +78,6 @@ def analyse(ensemble: np.ndarray, columns: np.ndarray, values: np.ndarray, sigma
     scale = 1.0 / (members - 1)
     p_yy = scale * seen.T @ seen + np.diag(sigma ** 2)  # (p, p)
     p_xy = scale * anomalies.T @ seen  # (d, p)
-    if threshold > 0.0:
-        sd_x = anomalies.std(axis=0, ddof=1)[:, None]
-        sd_y = seen.std(axis=0, ddof=1)[None, :]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            correlation = np.where(sd_x * sd_y > 0.0, p_xy / (sd_x * sd_y), 0.0)
-        p_xy = np.where(np.abs(correlation) >= threshold, p_xy, 0.0)
     innovation = values - mean[columns]
     factor = np.linalg.cholesky(p_yy)
     whitened = np.linalg.solve(factor, innovation)
