@@ -17,12 +17,13 @@ Study: the twin following a change of product (mu_C steps from 0.85 to 0.7 at 5 
 The plant is the physics core with a feed: a piece every 0.25 s, at rest on the annulus
 0.05-0.12 m, on a cone reversing between -8 and 8 rad/s every 2 s (the outer pieces slide
 and leave: about ten on the cone). Pieces fed from 5 s on are a new product (mu_C 0.7
-instead of 0.85; d 225 throughout); those already on the cone keep theirs. The twin (32
+instead of 0.85; d 225 throughout); those already on the cone keep theirs (with --all
+every piece's mu_C changes, as when the cone's surface does). The twin (32
 members, 0.5-s windows) starts from the file's prior (mu_C 0.85 +- 0.15). Prints its mu_C
 every 0.5 s, and the time after the change at which its estimate came within two spreads of
 0.7 and stayed there::
 
-    .venv/bin/python benchmarks/twin_product_change.py [--seconds 12] [--members 32]
+    .venv/bin/python benchmarks/twin_product_change.py [--seconds 12] [--members 32] [--all]
 """
 
 import argparse
@@ -30,7 +31,7 @@ from dataclasses import replace
 import time
 
 from calibration import calibration_line
-from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.params import ModelParams, product_row
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, warm_up, world_from_cone)
@@ -45,6 +46,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--seconds', type=float, default=12.0)
     parser.add_argument('--members', type=int, default=32)
+    parser.add_argument('--all', action='store_true',
+                        help="every piece's mu_C changes at 5 s (the cone's surface), not "
+                        "only the pieces fed from then on")
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     warm_up()
@@ -66,6 +70,8 @@ def main() -> None:
     for k in range(1, int(round(30 * args.seconds)) + 1):
         t = k / 30.0
         plant = advance(plant, params, profile, t).state
+        if k == round(30 * CHANGE) and args.all:  # the cone's surface changes: every piece's mu_C
+            plant = replace(plant, products=np.array([product_row(new)] * plant.count))
         if k % 8 == 0:  # a piece every 0.27 s
             product = new if t >= CHANGE else old
             r, a = feed.uniform(0.05, 0.12), feed.uniform(0.0, 2.0 * np.pi)
