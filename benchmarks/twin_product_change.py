@@ -47,8 +47,8 @@ def main() -> None:
     parser.add_argument('--seconds', type=float, default=12.0)
     parser.add_argument('--members', type=int, default=32)
     parser.add_argument('--all', action='store_true',
-                        help="every piece's mu_C changes at 5 s (the cone's surface), not "
-                        "only the pieces fed from then on")
+                        help='every piece changes its mu_C at 5 s (as with a new cone '
+                        'surface), not only the pieces fed from then on')
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     warm_up()

@@ -84,6 +84,8 @@ TWIN_PARAMETERS = (
               limit=Limit(0.0, 3600.0, 's', lo_open=True)),
     ParamSpec('open_loop_after', 1.0, 's without a frame after which the twin goes on open '
               'loop', limit=Limit(0.0, 3600.0, 's', lo_open=True)),
+    ParamSpec('max_delay', 0.2, 'how late (s) a frame may arrive: the twin goes back to itself '
+              'before it and analyses again', limit=Limit(0.0, 10.0, 's')),
     ParamSpec('death_after', 1.0, 'a piece not seen for this long (s) is dropped',
               limit=Limit(0.0, 3600.0, 's', lo_open=True)),
     ParamSpec('loosen', 10.0, "the solver's tolerances times this for the members",
@@ -137,7 +139,8 @@ class TwinNode(GuardedNode):
         self._model = model
         self._follower = Follower(SimParams(model=model, solver=solver), LiveSettings(
             twin=settings, horizons=horizons, forecast_period=float(values['forecast_period']),
-            open_loop_after=float(values['open_loop_after'])))
+            open_loop_after=float(values['open_loop_after']),
+            max_delay=float(values['max_delay'])))
         self._frame_id = str(values['frame_id'])
         self._codec = CdrCodec()
         self._outputs = Outputs(self, self._codec, TWIN_TOPICS)

@@ -37,6 +37,7 @@ members share, so a detection is turned into cone axes before the analysis (the 
 isotropic in x, y, so its covariance does not change).
 """
 
+import copy
 from dataclasses import dataclass, replace
 import math
 
@@ -146,6 +147,19 @@ class Twin:
         self._window_states = list(self.states)
         #: the window's associated detections: (t, piece ids (k,), world x, y (k, 2))
         self._window_frames: list[tuple[float, np.ndarray, np.ndarray]] = []
+
+    def snapshot(self) -> 'Twin':
+        """Return a copy that goes on apart from this twin (its random numbers included)."""
+        other = copy.copy(self)
+        other.states = list(self.states)
+        other.log_d, other.mu_c = self.log_d.copy(), self.mu_c.copy()
+        other.rng = copy.deepcopy(self.rng)
+        other.times, other.omegas = list(self.times), list(self.omegas)
+        other.masses, other.last_seen = dict(self.masses), dict(self.last_seen)
+        other._exits = list(self._exits)
+        other._window_states = list(self._window_states)
+        other._window_frames = list(self._window_frames)
+        return other
 
     @property
     def t(self) -> float:

@@ -48,12 +48,18 @@ STATES = ('waiting', 'following', 'open loop', 'lost')
 
 @dataclass(frozen=True)
 class LiveSettings:
-    """The estimator's settings, the forecasts' horizons (s) and period (s), open loop (s)."""
+    """
+    The estimator's settings, the forecasts' horizons (s) and period (s), open loop (s).
+
+    max_delay: how late (s of stream time behind the twin) a frame may arrive and still be
+    analysed, by going back to the twin as it was before it and analysing again.
+    """
 
     twin: TwinSettings = TwinSettings()
     horizons: tuple[float, ...] = (0.5, 1.0, 2.0)
     forecast_period: float = 0.1
     open_loop_after: float = 1.0
+    max_delay: float = 0.2
 
 
 class Follower:
@@ -68,6 +74,11 @@ class Follower:
         #: what the last analysed frame did
         self.last: Frame | None = None
         self._waiting: list[DetectionFrame] = []
+        #: (t, the twin before it moved to t, the frame analysed at t or None: open loop);
+        #: the last max_delay s of them
+        self._history: deque[tuple[float, Twin, DetectionFrame | None]] = deque()
+        #: the cone speeds measured over the history: (t, omega)
+        self._speeds: deque[tuple[float, float]] = deque()
         self._cone_t = -math.inf
         self._due = 0.0
         #: per frame of the last second: (t, detections, associated or born)
@@ -97,12 +108,14 @@ class Follower:
         """
         twin = self._start(t)
         twin.cone_speed(t, omega)
+        self._speeds.append((t, omega))
         self._cone_t = t
         taken = self._take(lambda waiting: waiting.t <= t)
         if taken or self.state(t) != 'open loop' or t <= twin.t:
             return taken
         start = time.perf_counter()
         before = twin.t
+        self._remember(t, None)
         twin.predict(t)
         self._window['stream'] += t - before
         self._forecast_if_due(t)
@@ -127,15 +140,52 @@ class Follower:
         taken = []
         while self._waiting and ready(self._waiting[0]):
             found = self._waiting.pop(0)
-            self._analyse(found)
+            if found.t < self.twin.t:
+                self._rewind(found)
+            else:
+                self._analyse(found)
             taken.append(found.t)
         return taken
+
+    def _remember(self, t: float, found: DetectionFrame | None) -> None:
+        """Keep the twin as it is before it moves to t (for frames that come late)."""
+        self._history.append((t, self.twin.snapshot(), found))
+        while self._history and self._history[0][0] < t - self.settings.max_delay:
+            self._history.popleft()
+        while self._speeds and self._speeds[0][0] < t - self.settings.max_delay - 1.0:
+            self._speeds.popleft()
+
+    def _rewind(self, late: DetectionFrame) -> None:
+        """
+        Go back to the twin before the first step past the late frame; analyse again.
+
+        The late frame and the frames after it are analysed in stamp order, from the twin
+        as it was (its random numbers included): the result is what the frames in order
+        would have given. A frame older than the history raises ValueError.
+        """
+        later = [k for k, (t, _, _) in enumerate(self._history) if t > late.t]
+        if not later or self._history[later[0]][1].t > late.t:
+            raise ValueError(f'detections at t = {late.t} s are older than the twin '
+                             f'({self.twin.t} s) by more than max_delay '
+                             f'({self.settings.max_delay} s)')
+        first = later[0]
+        _, twin, _ = self._history[first]
+        frames = [found for _, _, found in list(self._history)[first:] if found is not None]
+        for _ in range(len(self._history) - first):
+            self._history.pop()
+        self.twin = twin
+        for t, omega in self._speeds:
+            if t > twin.times[-1]:
+                twin.cone_speed(t, omega)
+        for found in sorted(frames + [late], key=lambda f: f.t):
+            self._analyse(found)
 
     def _analyse(self, found: DetectionFrame) -> Frame:
         """Analyse a frame; make the forecast if one is due."""
         twin = self.twin
         start = time.perf_counter()
         before = twin.t
+        self._remember(found.t, found)
         done = twin.update(found.t, found.xy, found.masses)
         self.last_frame = found.t
         self.last = done
