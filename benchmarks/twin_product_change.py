@@ -24,6 +24,7 @@ every 0.5 s, and the time after the change at which its estimate came within two
 0.7 and stayed there::
 
     .venv/bin/python benchmarks/twin_product_change.py [--seconds 12] [--members 32] [--all]
+        [--drift 0.01]
 """
 
 import argparse
@@ -49,6 +50,8 @@ def main() -> None:
     parser.add_argument('--all', action='store_true',
                         help='every piece changes its mu_C at 5 s (as with a new cone '
                         'surface), not only the pieces fed from then on')
+    parser.add_argument('--drift', type=float, default=TwinSettings.drift,
+                        help="the parameters' random walk per second (TwinSettings.drift)")
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     warm_up()
@@ -63,7 +66,7 @@ def main() -> None:
     plant = SimState()
     feed = np.random.default_rng(3)
     twin = Twin(params, TwinSettings(members=args.members, sigma=0.001, mu_C_spread=0.15,
-                                     seed=1))
+                                     seed=1, drift=args.drift))
     rng = np.random.default_rng(0)
     trace = []
     start = time.perf_counter()

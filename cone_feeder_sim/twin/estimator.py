@@ -88,7 +88,7 @@ class TwinSettings:
     d_spread: float = 0.5
     mu_C: float = 0.85
     mu_C_spread: float = 0.05
-    drift: float = 0.01
+    drift: float = 0.05
     inflation: float = 1.1
     death_after: float = 1.0
     seed: int = 0

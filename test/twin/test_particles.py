@@ -63,18 +63,15 @@ PLACES = [[0.10, 0.02], [-0.08, 0.09], [0.03, -0.13], [-0.12, -0.05], [0.06, 0.1
           [-0.02, -0.07], [0.07, -0.02]]
 
 
-@pytest.mark.parametrize('window', [0.5, 0.0])
-def test_d_and_mu_c_are_identified_where_the_pieces_slide(window: float) -> None:
+def test_d_and_mu_c_are_identified_where_the_pieces_slide() -> None:
     # the plant's d and mu_C are 2x and -0.15 from the twin's prior (d 225 +- 50 % on the
     # log scale, mu_C 0.85 +- 0.15); the cone reverses at 8 rad/s, the outer pieces slide.
-    # The particle step over 0.5-s windows has both within three of its spreads after 3 s;
-    # frame by frame (window 0, the ensemble Kalman filter's update) they are not
+    # The particle step over 0.5-s windows has both within three of its spreads after 3 s
     profile = RotationProfile.from_table([[0.0, 0.0], [0.5, 8.0], [1.5, 8.0], [2.0, -8.0]])
     product = replace(MODEL.product, d=450.0, mu_C=0.7)
     q = np.array([[x, y, resting_height(MODEL, product, x, y)] for x, y in PLACES])
     plant, _ = add_particles(SimState(), PARAMS, q, products=[product] * len(q))
-    twin = Twin(PARAMS, TwinSettings(members=32, sigma=0.001, mu_C_spread=0.15, seed=1,
-                                     window=window))
+    twin = Twin(PARAMS, TwinSettings(members=32, sigma=0.001, mu_C_spread=0.15, seed=1))
     rng = np.random.default_rng(0)
     for k in range(1, 91):
         t = k / 30.0
@@ -85,8 +82,6 @@ def test_d_and_mu_c_are_identified_where_the_pieces_slide(window: float) -> None
     found = twin.parameters()
     z = {key: (found[key][0] - truth) / found[key][1]
          for key, truth in (('d', 450.0), ('mu_C', 0.7))}
-    if window > 0.0:
-        assert all(abs(v) < 3.0 for v in z.values()), (found, z)
-        assert found['mu_C'][1] < 0.15  # it learned
-    else:
-        assert any(abs(v) > 3.0 for v in z.values()), (found, z)
+    assert all(abs(v) < 3.0 for v in z.values()), (found, z)
+    # it learned: spreads below the prior's (the random walk of 5 % per s keeps them up)
+    assert found['mu_C'][1] < 0.15 and found['d'][1] < 0.5 * found['d'][0]
