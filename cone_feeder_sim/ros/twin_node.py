@@ -222,7 +222,7 @@ class TwinNode(GuardedNode):
 
     def _publish(self, taken: list[float]) -> None:
         """Publish the twin's pieces, parameters and a new forecast (the frames taken)."""
-        twin = self._follower.twin
+        twin = self._follower.current
         t = twin.t
         ns = round(t * 1e9)
         head = header(t, self._frame_id)
@@ -262,11 +262,11 @@ class TwinNode(GuardedNode):
             'inputs refused': str(self._refused),
         }
         if self._follower.twin is not None:
-            ids, _, covariance = self._follower.twin.pieces()
+            ids, _, covariance = self._follower.current.pieces()
             spread = np.sqrt(np.trace(covariance, axis1=1, axis2=2)) if len(ids) else [np.nan]
             values['pieces'] = str(len(ids))
             values['ensemble spread median (mm)'] = f'{1e3 * float(np.median(spread)):.3g}'
-            for key, (estimate, sd) in self._follower.twin.parameters().items():
+            for key, (estimate, sd) in self._follower.current.parameters().items():
                 values[key] = f'{estimate:.5g} +- {sd:.2g}'
         level = 0 if state == 'following' else 1
         status = diagnostic_status(level, f'{self.get_fully_qualified_name()}: twin', state,

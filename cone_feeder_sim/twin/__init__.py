@@ -18,11 +18,13 @@ Built so far, each with its checks (doc/twin.md): ``enkf`` (the ensemble Kalman 
 analysis of an ensemble of states against observed positions, with the normalised innovation
 squared), ``association`` (detections to the twin's pieces: a chi-square gate, then an
 optimal assignment) and ``estimator`` (``Twin``: an ensemble of the physics core's states
-following detections, births, deaths and exits, d and mu_C as augmented state) and
+following detections, births, deaths and exits, d and mu_C weighed per window) and
 ``forecast`` (each piece's channel probabilities and exit time, each channel's mass over
 the horizons, from the members), ``spec`` and ``run`` (the headless ``cone-feeder-sim twin``
 over recorded CSV streams), ``frames`` (the inputs' checks), ``live`` (``Follower``: the
-twin frame by frame, as ``twin_node`` runs it) and ``messages`` (its estimates as standard
-messages). Still to come: on-line identification that works, late detections re-run from
-their stamp, MCAP streams, the report. No ROS here.
+twin frame by frame, as ``twin_node`` runs it; late frames analysed again from a snapshot),
+``messages`` (its estimates as standard messages) and ``particles`` (the parameters'
+particle step once per window). Still to come:
+MCAP streams and the report of the headless twin, contact between pieces in the twin. No
+ROS here.
 """

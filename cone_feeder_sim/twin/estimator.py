@@ -233,7 +233,7 @@ class Twin:
         detections = np.asarray(detections, dtype=float).reshape(-1, detections.shape[-1])
         if not np.isfinite(detections).all():
             raise ValueError('a detection is not finite')
-        if t < self.t:  # re-running from a history of states is still to come
+        if t < self.t:  # a late frame: live.Follower goes back to a snapshot for it
             raise ValueError(f'detections at t = {t} s are older than the twin ({self.t} s)')
         if t > self.t:
             self.predict(t)
@@ -279,17 +279,13 @@ class Twin:
         ids, mean, spread = self.pieces()
         noise = 2.0 * self.settings.sigma ** 2 * np.eye(2)
         dropped: list[int] = []
-        for a in range(len(ids)):
-            if int(ids[a]) in dropped:
-                continue
-            diff = mean[a + 1:] - mean[a]
-            near = np.flatnonzero(np.hypot(diff[:, 0], diff[:, 1])
-                                  < 10.0 * self.settings.sigma + 1e-3)  # a cheap prefilter
-            for b in near + a + 1:
-                d = mean[b] - mean[a]
-                if int(ids[b]) not in dropped and d @ np.linalg.solve(
-                        spread[a] + spread[b] + noise, d) < GATE_CHI2:
-                    dropped.append(int(ids[b]))
+        apart = np.hypot(*(mean[:, None, :] - mean[None, :, :]).transpose(2, 0, 1))
+        near = np.argwhere(np.triu(apart < 10.0 * self.settings.sigma + 1e-3, k=1))
+        for a, b in near:  # a cheap prefilter, then the gate (pairs in id order: a < b)
+            d = mean[b] - mean[a]
+            if (int(ids[a]) not in dropped and int(ids[b]) not in dropped
+                    and d @ np.linalg.solve(spread[a] + spread[b] + noise, d) < GATE_CHI2):
+                dropped.append(int(ids[b]))
         self._drop(dropped)
         return dropped
 

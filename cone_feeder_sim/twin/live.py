@@ -18,12 +18,13 @@ A twin fed as a live feeder reports: frame by frame, forecasts on a schedule, it
 input (its time starts at that stamp), each accepted frame is analysed
 (:meth:`.estimator.Twin.update`), a forecast is made when ``forecast_period`` s of stream
 time have passed since the last, and a cone speed that arrives while no frame has come for
-``open_loop_after`` s moves the twin on by itself (open loop: the forecasts go on from the
-model alone). Its state is one of
+``open_loop_after`` s moves a copy of the twin on by itself (open loop: the forecasts go on
+from the model alone). Its state is one of
 
 - ``waiting``: no input yet;
 - ``following``: frames arrive and most detections are associated;
-- ``open loop``: no frame for ``open_loop_after`` s;
+- ``open loop``: no frame for ``open_loop_after`` s (the cone speeds move a copy of the
+  twin on, :attr:`Follower.current`, and the forecasts go on from it);
 - ``lost``: frames arrive but fewer than half of the last second's detections were
   associated with a piece or bore one (the twin's pieces are not where the camera sees
   them, and the camera's are near the rim, where none is born).
@@ -74,6 +75,8 @@ class Follower:
         #: what the last analysed frame did
         self.last: Frame | None = None
         self._waiting: list[DetectionFrame] = []
+        #: in open loop: a copy of the twin moved on by the cone speeds (see current)
+        self._ahead: Twin | None = None
         #: (t, the twin before it moved to t, the frame analysed at t or None: open loop);
         #: the last max_delay s of them
         self._history: deque[tuple[float, Twin, DetectionFrame | None]] = deque()
@@ -111,16 +114,29 @@ class Follower:
         self._speeds.append((t, omega))
         self._cone_t = t
         taken = self._take(lambda waiting: waiting.t <= t)
-        if taken or self.state(t) != 'open loop' or t <= twin.t:
+        if taken or self.state(t) != 'open loop' or t <= self.current.t:
             return taken
         start = time.perf_counter()
-        before = twin.t
-        self._remember(t, None)
-        twin.predict(t)
+        if self._ahead is None:  # the twin stays where the last frame left it
+            self._ahead = twin.snapshot()
+        before = self._ahead.t
+        self._ahead.cone_speed(t, omega)
+        self._ahead.predict(t)
         self._window['stream'] += t - before
-        self._forecast_if_due(t)
+        self._forecast_if_due(t, self._ahead)
         self._window['busy'] += time.perf_counter() - start
         return taken
+
+    @property
+    def current(self) -> Twin | None:
+        """
+        Return the twin as it stands now: in open loop, a copy moved on by the model alone.
+
+        The twin itself stays at its last frame, so that frames that come back late after a
+        pause (or that a slow twin takes late) are analysed from there, never refused as
+        older than a twin the cone speeds moved on.
+        """
+        return self._ahead if self._ahead is not None else self.twin
 
     def frame(self, found: DetectionFrame) -> list[float]:
         """
@@ -182,6 +198,7 @@ class Follower:
 
     def _analyse(self, found: DetectionFrame) -> Frame:
         """Analyse a frame; make the forecast if one is due."""
+        self._ahead = None
         twin = self.twin
         start = time.perf_counter()
         before = twin.t
@@ -199,14 +216,14 @@ class Follower:
         self._recent.append((found.t, len(found.xy), done.associated + done.births))
         while self._recent and self._recent[0][0] < found.t - 1.0:
             self._recent.popleft()
-        self._forecast_if_due(found.t)
+        self._forecast_if_due(found.t, twin)
         window['busy'] += time.perf_counter() - start
         return done
 
-    def _forecast_if_due(self, t: float) -> Forecast | None:
-        if t + 1e-9 < self._due or self.twin is None:
+    def _forecast_if_due(self, t: float, twin: Twin) -> Forecast | None:
+        if t + 1e-9 < self._due:
             return None
-        self.outlook = forecast(self.twin, self.settings.horizons)
+        self.outlook = forecast(twin, self.settings.horizons)
         self._window['forecasts'] += 1
         period = self.settings.forecast_period
         while self._due <= t + 1e-9:
@@ -217,7 +234,7 @@ class Follower:
         """Return the state at stream time t (default: the twin's time)."""
         if self.twin is None:
             return 'waiting'
-        t = self.twin.t if t is None else t
+        t = self.current.t if t is None else t
         if self.last_frame is None or t - self.last_frame > self.settings.open_loop_after:
             return 'open loop'
         seen = sum(k for _, k, _ in self._recent)

@@ -53,8 +53,10 @@ def test_the_camera_stops_the_twin_goes_on_open_loop_and_recovers() -> None:
         states[t] = follower.state(t)
         if follower.outlook is not None and (not forecasts or follower.outlook.t > forecasts[-1]):
             forecasts.append(follower.outlook.t)
-        if camera or states[t] == 'open loop':
-            assert follower.t == t  # else it waits: within open_loop_after of the last frame
+        if camera:
+            assert follower.t == t
+        elif states[t] == 'open loop':  # a copy moves on; the twin waits at its last frame
+            assert follower.current.t == t and follower.t == 1.0
     assert states[30 / 30.0] == 'following'
     assert states[44 / 30.0] == 'following'  # within open_loop_after of the last frame
     assert all(state == 'open loop' for t, state in states.items() if 1.6 < t <= 2.5)
