@@ -148,7 +148,7 @@ class TwinNode(GuardedNode):
                      if spec.direction == 'out'}
         self._outputs.subscription('detections', self._on_detections)
         self._outputs.subscription('cone_state', self._on_cone_state)
-        self._newest: tuple[float, float] | None = None  # (stamp s, monotonic s) of it
+        self._lead: float | None = None  # stamps minus their arrival times (s): the largest
         self._latencies: list[float] = []
         self._arrivals: dict[float, int] = {}  # a waiting frame's stamp (s): arrival (ns)
         self._published_outlook: Any = None
@@ -166,15 +166,20 @@ class TwinNode(GuardedNode):
 
     # ------------------------------------------------------------------ inputs
 
-    def _latest(self) -> float | None:
-        """Return the newest accepted stamp plus the wall time since (s), None: none yet."""
-        if self._newest is None:
-            return None
-        return self._newest[0] + time.monotonic() - self._newest[1]
+    def _latest(self, arrival: float | None = None) -> float | None:
+        """
+        Return the newest stamp an input arriving at ``arrival`` (wall s) may carry, or None.
 
-    def _took(self, t: float) -> None:
-        if self._newest is None or t >= self._newest[0]:
-            self._newest = (t, time.monotonic())
+        The stamps' lead over their arrival times (the largest of the inputs taken so far)
+        plus the arrival: measured from the arrival, not from when the twin took the input,
+        so that a twin busy for a second does not take the next frames for the future.
+        """
+        if self._lead is None:
+            return None
+        return (time.time() if arrival is None else arrival) + self._lead
+
+    def _took(self, t: float, arrival: float) -> None:
+        self._lead = t - arrival if self._lead is None else max(self._lead, t - arrival)
 
     def _refuse(self, text: str) -> None:
         self._refused += 1
@@ -185,7 +190,8 @@ class TwinNode(GuardedNode):
         msg = self._codec.decode('sensor_msgs/msg/JointState', data, strict=False)
         t = _seconds(msg['header']['stamp'])
         self._outputs.received('cone_state', data, round(t * 1e9))
-        latest = self._latest()
+        arrival = _arrival(info)
+        latest = self._latest(arrival)
         before = self._follower.outlook
         try:
             if latest is not None and t > latest + MAX_FUTURE:
@@ -196,25 +202,25 @@ class TwinNode(GuardedNode):
         except (TwinError, ValueError) as exc:
             self._refuse(str(exc))
             return
-        self._took(t)
+        self._took(t, arrival)
         if taken or self._follower.outlook is not before:
             self._publish(taken)
 
     def _on_detections(self, data: bytes, info: Any) -> None:
         """Take a frame of detections: check it, hand it to the twin, publish what it did."""
+        arrival = _arrival(info)
         try:
             msg = self._codec.decode('sensor_msgs/msg/PointCloud2', data, strict=False)
             t = _seconds(msg['header']['stamp'])
             self._outputs.received('detections', data, round(t * 1e9))
             found = detection_frame(t, cloud_points(msg), msg['header']['frame_id'],
-                                    self._frame_id, self._latest())
-            if info is not None and info.get('received_timestamp'):
-                self._arrivals[t] = int(info['received_timestamp'])
+                                    self._frame_id, self._latest(arrival))
+            self._arrivals[t] = round(arrival * 1e9)
             taken = self._follower.frame(found)
         except (ConeFeederError, ValueError) as exc:
             self._refuse(str(exc))
             return
-        self._took(t)
+        self._took(t, arrival)
         if taken:
             self._publish(taken)
 
@@ -246,7 +252,7 @@ class TwinNode(GuardedNode):
     def _publish_diagnostics(self) -> None:
         figures = self._follower.figures()
         t = self._follower.t
-        state = self._follower.state(self._latest())
+        state = self._follower.state(self._latest())  # the stream's time now, as estimated
         latencies = np.array(self._latencies or [np.nan])
         self._latencies = []
         values = {
@@ -288,6 +294,12 @@ class TwinNode(GuardedNode):
 
 def _seconds(value: Any) -> float:
     return value['sec'] + value['nanosec'] * 1e-9
+
+
+def _arrival(info: Any) -> float:
+    """Return when a message arrived (wall s): rmw's received_timestamp, else now."""
+    received = info.get('received_timestamp') if info is not None else None
+    return received * 1e-9 if received else time.time()
 
 
 def main(args: list[str] | None = None) -> int:
