@@ -70,8 +70,9 @@ __all__ = ['main', 'TwinNode']
 
 #: The twin's own parameters (the model, solver and recording ones are sim_node's).
 TWIN_PARAMETERS = (
-    ParamSpec('members', 8, 'ensemble size M (simulations the twin runs side by side; 8 '
-              'keeps up with 30 pieces at 30 frames/s on 2 cores, doc/twin.md)',
+    ParamSpec('members', 4, 'ensemble size M (simulations the twin runs side by side; 4 '
+              'about keeps up with 30 pieces at 30 frames/s on 2 cores, 8 does not: '
+              'doc/twin.md)',
               limit=Limit(2, 10_000, '')),
     ParamSpec('sigma', 0.002, "the detections' noise (m, each of x and y)",
               limit=Limit(0.0, 1.0, 'm', lo_open=True)),
