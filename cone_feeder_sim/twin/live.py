@@ -77,9 +77,8 @@ class Follower:
         self._waiting: list[DetectionFrame] = []
         #: in open loop: a copy of the twin moved on by the cone speeds (see current)
         self._ahead: Twin | None = None
-        #: (t, the twin before it moved to t, the frame analysed at t or None: open loop);
-        #: the last max_delay s of them
-        self._history: deque[tuple[float, Twin, DetectionFrame | None]] = deque()
+        #: (t, the twin before it moved to t, the frame analysed at t); the last max_delay s
+        self._history: deque[tuple[float, Twin, DetectionFrame]] = deque()
         #: the cone speeds measured over the history: (t, omega)
         self._speeds: deque[tuple[float, float]] = deque()
         self._cone_t = -math.inf
@@ -105,9 +104,9 @@ class Follower:
         """
         Take a measured cone speed (rad/s) at t (s); return the stamps of the frames taken.
 
-        Frames that waited for the speed at their stamp are analysed now; in open loop the
-        twin moves on to t by itself. Raises ValueError for a speed out of order or not
-        finite.
+        Frames that waited for the speed at their stamp are analysed now; in open loop a
+        copy of the twin moves on to t by itself (:attr:`current`). Raises ValueError for a
+        speed out of order or not finite.
         """
         twin = self._start(t)
         twin.cone_speed(t, omega)
@@ -163,7 +162,7 @@ class Follower:
             taken.append(found.t)
         return taken
 
-    def _remember(self, t: float, found: DetectionFrame | None) -> None:
+    def _remember(self, t: float, found: DetectionFrame) -> None:
         """Keep the twin as it is before it moves to t (for frames that come late)."""
         self._history.append((t, self.twin.snapshot(), found))
         while self._history and self._history[0][0] < t - self.settings.max_delay:
@@ -186,7 +185,7 @@ class Follower:
                              f'({self.settings.max_delay} s)')
         first = later[0]
         _, twin, _ = self._history[first]
-        frames = [found for _, _, found in list(self._history)[first:] if found is not None]
+        frames = [found for _, _, found in list(self._history)[first:]]
         for _ in range(len(self._history) - first):
             self._history.pop()
         self.twin = twin
