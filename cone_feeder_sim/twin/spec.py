@@ -18,8 +18,11 @@ A twin file is a YAML mapping::
 
     scenario: base.yaml        # the machine, the product prior (model.d, model.mu_C), the
                                # solver; its particles and rotation are not used
-    detections: detections.csv # columns t, x, y, z, track_id[, mass] (s, m, m, m, -, kg)
-    cone: cone.csv             # columns t, omega (s, rad/s)
+    detections: detections.csv # columns t, x, y, z, track_id[, mass] (s, m, m, m, -, kg),
+                               # or an MCAP file (a PointCloud2 topic: detections_topic,
+                               # default /detections, else /particle_states)
+    cone: cone.csv             # columns t, omega (s, rad/s), or an MCAP file (a JointState
+                               # topic: cone_topic, default /cone_state; joint cone)
     # defaults:
     members: 32                # the ensemble's size
     sigma: 0.002               # the detections' noise (m)
@@ -40,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from .streams import mcap_cone, mcap_detections
 from ..errors import ConeFeederError, TwinError
 from ..feeder.scenario import Scenario
 from ..formats.parameter_file import read_yaml
@@ -47,7 +51,8 @@ from ..formats.scenario_file import load_scenario
 
 __all__ = ['load_twin', 'TwinSpec', 'TWIN_KEYS']
 
-TWIN_KEYS = ('scenario', 'detections', 'cone', 'members', 'sigma', 'horizons', 'every', 'seed')
+TWIN_KEYS = ('scenario', 'detections', 'cone', 'members', 'sigma', 'horizons', 'every', 'seed',
+             'detections_topic', 'cone_topic')
 
 
 @dataclass(frozen=True)
@@ -128,8 +133,14 @@ def load_twin(path: str | Path) -> TwinSpec:
             raise TwinError(f'{key} must name a file, got {content.get(key)!r}')
     base = path.parent
     scenario = load_scenario(base / content['scenario'])
-    detections = _rows(base / content['detections'], ('t', 'x', 'y'), ('mass',))
-    cone = _rows(base / content['cone'], ('t', 'omega'), ())
+    for key in ('detections_topic', 'cone_topic'):
+        if content.get(key) is not None and not isinstance(content[key], str):
+            raise TwinError(f'{key} must name a topic, got {content[key]!r}')
+    found, speeds = base / content['detections'], base / content['cone']
+    detections = (mcap_detections(found, content.get('detections_topic'))
+                  if found.suffix == '.mcap' else _rows(found, ('t', 'x', 'y'), ('mass',)))
+    cone = (mcap_cone(speeds, content.get('cone_topic')) if speeds.suffix == '.mcap'
+            else _rows(speeds, ('t', 'omega'), ()))
     horizons = content.get('horizons', [0.5, 1.0, 2.0])
     if (not isinstance(horizons, list) or not horizons or any(
             isinstance(h, bool) or not isinstance(h, (int, float)) or not 0 < h <= 60

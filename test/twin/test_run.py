@@ -11,17 +11,20 @@
 # WITHOUT WARRANTIES OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""The headless twin: a twin file's streams in, the CSVs out; bad frames refused, named."""
+"""The headless twin: a twin file's streams (CSV or MCAP) in, the CSVs out; bad input named."""
 
 import csv
 from pathlib import Path
 
 from cone_feeder_sim.cli import main
+from cone_feeder_sim.errors import TwinError
+from cone_feeder_sim.formats.mcap_reader import open_recording
 from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
-from cone_feeder_sim.twin.run import FILES
+from cone_feeder_sim.twin.run import FILES, run_twin
+from cone_feeder_sim.twin.spec import load_twin
 import numpy as np
 import pytest
 import yaml
@@ -109,3 +112,35 @@ def test_a_bad_twin_file_is_named(tmp_path: Path, capsys: pytest.CaptureFixture,
     (tmp_path / 'twin.yaml').write_text(yaml.safe_dump({**content, **change}))
     assert main(['twin', str(tmp_path / 'twin.yaml'), '--out', str(tmp_path / 'o')]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_the_streams_are_read_from_a_recording(tmp_path: Path) -> None:
+    # the headless runner's recording stands in for a camera's and an encoder's: its
+    # particle_states are the detections, its cone_state the cone speed
+    places = [{'position': [x, y, 0.0], 'on_surface': True} for x, y in PLACES[:4]]
+    (tmp_path / 'scenario.yaml').write_text(yaml.safe_dump(
+        {'duration': 1.0, 'rotation': ROTATION, 'particles': places,
+         'output_interval': 1.0 / 30.0}))
+    recording = tmp_path / 'plant.mcap'
+    assert main(['run', str(tmp_path / 'scenario.yaml'), '--events',
+                 str(tmp_path / 'events.csv'), '--mcap', str(recording), '--quiet']) == 0
+    (tmp_path / 'twin.yaml').write_text(yaml.safe_dump(
+        {'scenario': 'scenario.yaml', 'detections': 'plant.mcap', 'cone': 'plant.mcap',
+         'members': 8, 'sigma': 0.001}))
+    spec = load_twin(tmp_path / 'twin.yaml')
+    states = list(open_recording(recording).messages({'/particle_states'}))
+    assert len(np.unique(spec.detections[:, 0])) == len(states) >= 29
+    assert len(spec.detections) == 4 * len(states)
+    assert np.allclose(spec.detections[:, 3], MODEL.product.m)  # particle_states' mass field
+    assert len(spec.cone) >= 29 and spec.cone[-1, 1] == pytest.approx(
+        RotationProfile.from_table(ROTATION).omega(spec.cone[-1, 0]))
+    summary = run_twin(spec, tmp_path / 'out')
+    frames = read(tmp_path / 'out' / 'frames.csv')
+    assert summary.refused == 0 and int(frames[0]['births']) == 4
+    assert all(int(f['associated']) == 4 for f in frames[1:])
+    (tmp_path / 'twin.yaml').write_text(yaml.safe_dump(
+        {'scenario': 'scenario.yaml', 'detections': 'plant.mcap', 'cone': 'plant.mcap',
+         'detections_topic': '/exit_events_nowhere'}))
+    with pytest.raises(TwinError, match='no sensor_msgs/msg/PointCloud2 topic '
+                                        '/exit_events_nowhere'):
+        load_twin(tmp_path / 'twin.yaml')

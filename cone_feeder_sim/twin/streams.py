@@ -1,0 +1,83 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+"""
+A twin's streams from an MCAP recording: a PointCloud2 topic's detections, a JointState's speeds.
+
+A recording of ``sim_node`` (or of a camera and an encoder, recorded by rosbag2 in MCAP) is
+read as the headless twin's input: each PointCloud2 message of the detections topic is one
+frame at its header's stamp (fields x, y and optionally mass), each JointState message of
+the cone topic one speed of the joint ``cone``. Topics default to ``/detections`` (else
+``/particle_states``, what sim_node records) and ``/cone_state``.
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConeFeederError, TwinError
+from ..formats.cdr import decode
+from ..formats.mcap_reader import open_recording
+from ..formats.pointcloud import cloud_points
+
+__all__ = ['mcap_cone', 'mcap_detections']
+
+#: The detections topics tried in turn when none is named.
+DETECTION_TOPICS = ('/detections', '/particle_states')
+
+
+def _recording(path: Path, topic: str | None, defaults: tuple[str, ...], type_name: str) -> tuple:
+    try:
+        recording = open_recording(path)
+    except ConeFeederError as exc:
+        raise TwinError(f'{path}: {exc}') from None
+    kinds = {name: t.type_name for name, t in recording.topics.items()}
+    chosen = topic or next((name for name in defaults if name in kinds), None)
+    if chosen is None or kinds.get(chosen) != type_name:
+        offered = ', '.join(f'{name} ({kind})' for name, kind in sorted(kinds.items()))
+        raise TwinError(f'{path}: no {type_name} topic {chosen or " or ".join(defaults)} '
+                        f'(it has {offered or "no topics"})')
+    return recording, chosen
+
+
+def mcap_detections(path: Path, topic: str | None = None) -> np.ndarray:
+    """Return the detections (k, 4): t (s), x, y (m), mass (kg, NaN: not given), sorted."""
+    recording, chosen = _recording(path, topic, DETECTION_TOPICS, 'sensor_msgs/msg/PointCloud2')
+    rows = []
+    for message in recording.messages({chosen}):
+        cloud = decode(message.type_name, message.data)
+        stamp = cloud['header']['stamp']
+        t = stamp['sec'] + stamp['nanosec'] * 1e-9
+        points = cloud_points(cloud)
+        names = points.dtype.names or ()
+        if 'x' not in names or 'y' not in names:
+            raise TwinError(f'{path}, {chosen}: a cloud without x and y fields')
+        mass = (np.asarray(points['mass'], dtype=float) if 'mass' in names
+                else np.full(len(points), np.nan))
+        rows.append(np.column_stack([np.full(len(points), t), points['x'], points['y'], mass]))
+    table = np.concatenate(rows) if rows else np.zeros((0, 4))
+    return table[np.argsort(table[:, 0], kind='stable')]
+
+
+def mcap_cone(path: Path, topic: str | None = None, joint: str = 'cone') -> np.ndarray:
+    """Return the cone's measured speeds (j, 2): t (s), omega (rad/s), sorted."""
+    recording, chosen = _recording(path, topic, ('/cone_state',), 'sensor_msgs/msg/JointState')
+    rows = []
+    for message in recording.messages({chosen}):
+        state = decode(message.type_name, message.data)
+        if joint in state['name'] and len(state['velocity']) > state['name'].index(joint):
+            stamp = state['header']['stamp']
+            rows.append([stamp['sec'] + stamp['nanosec'] * 1e-9,
+                         float(state['velocity'][state['name'].index(joint)])])
+    table = np.array(rows, dtype=float).reshape(-1, 2)
+    return table[np.argsort(table[:, 0], kind='stable')]
