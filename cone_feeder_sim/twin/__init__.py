@@ -21,9 +21,9 @@ optimal assignment) and ``estimator`` (``Twin``: an ensemble of the physics core
 following detections, births, deaths and exits, d and mu_C weighed per window) and
 ``forecast`` (each piece's channel probabilities and exit time, each channel's mass over
 the horizons, from the members), ``spec``, ``streams`` and ``run`` (the headless
-``cone-feeder-sim twin`` over recorded CSV or MCAP streams), ``frames`` (the inputs' checks), ``live`` (``Follower``: the
-twin frame by frame, as ``twin_node`` runs it; late frames analysed again from a snapshot),
-``messages`` (its estimates as standard messages) and ``particles`` (the parameters'
-particle step once per window). Still to come: the headless
-twin's report, contact between pieces in the twin. No ROS here.
+``cone-feeder-sim twin`` over recorded CSV or MCAP streams), ``frames`` (the inputs'
+checks), ``live`` (``Follower``: the twin frame by frame, as ``twin_node`` runs it; late
+frames analysed again from a snapshot), ``messages`` (its estimates as standard messages)
+and ``particles`` (the parameters' particle step once per window). Still to come: the
+headless twin's report, contact between pieces in the twin. No ROS here.
 """
