@@ -36,11 +36,10 @@ import sys
 import time
 
 from calibration import calibration_line
+from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
-
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: I100 - after rclpy, as a ROS user would
 
 BIN = Path(sys.executable).parent
 

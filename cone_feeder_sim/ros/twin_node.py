@@ -216,8 +216,12 @@ class TwinNode(GuardedNode):
             self._outputs.received('detections', data, round(t * 1e9))
             found = detection_frame(t, cloud_points(msg), msg['header']['frame_id'],
                                     self._frame_id, self._latest(arrival))
-            self._arrivals[t] = round(arrival * 1e9)
-            taken = self._follower.frame(found)
+            self._arrivals[t] = round(arrival * 1e9)  # until the frame is taken
+            try:
+                taken = self._follower.frame(found)
+            except ValueError:
+                del self._arrivals[t]  # refused by the twin: it will not be taken
+                raise
         except (ConeFeederError, ValueError) as exc:
             self._refuse(str(exc))
             return

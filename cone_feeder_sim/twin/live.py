@@ -31,10 +31,10 @@ from the model alone). Its state is one of
 """
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 import math
 import time
-from typing import Any
 
 from .estimator import Frame, Twin, TwinSettings
 from .forecast import Forecast, forecast
@@ -151,7 +151,7 @@ class Follower:
         self._waiting.append(found)
         return taken + self._take(lambda waiting: waiting.t <= self._cone_t)
 
-    def _take(self, ready: Any) -> list[float]:
+    def _take(self, ready: Callable[[DetectionFrame], bool]) -> list[float]:
         taken = []
         while self._waiting and ready(self._waiting[0]):
             found = self._waiting.pop(0)
