@@ -41,6 +41,7 @@ from the future, a joint of another name) is logged in one line and the twin goe
 
 from dataclasses import replace
 import sys
+import threading
 import time
 from typing import Any
 
@@ -52,7 +53,7 @@ from .outputs import Outputs
 from .parameters import declare, model_from_values, parameter_specs, ParamSpec, \
     warn_unknown_parameters
 from .recording import NodeRecording
-from ..errors import ConeFeederError, TwinError
+from ..errors import ConeFeederError, Stopped, TwinError
 from ..formats.cdr import CdrCodec
 from ..formats.messages import header, stamp
 from ..formats.parameter_file import load_model_params
@@ -93,6 +94,8 @@ TWIN_PARAMETERS = (
               limit=Limit(1.0, 1.0e6, '')),
     ParamSpec('seed', 0, "the ensemble's seed", limit=Limit(0, 2 ** 31 - 1, '')),
 )
+#: How often (s) the watcher looks whether the context was shut down.
+STOP_POLL = 0.05
 #: sim_node's parameters that mean the same here.
 SHARED = ('parameter_file', 'frame_id', 'diagnostics.period', 'record_path',
           'record_compression', 'record_max_file_size', 'record_max_file_duration',
@@ -161,9 +164,21 @@ class TwinNode(GuardedNode):
             self._outputs.add_hook(self._recording.recorder.hook)
             self.get_logger().info(f'recording to {self._recording.path}')
         self.create_timer(float(values['diagnostics.period']), self._publish_diagnostics)
+        # the twin computes in the executor's thread, where a signal's handler waits for the
+        # callback's end; this thread sees the context shut down and stops the kernels
+        self._done = threading.Event()
+        self._watcher = threading.Thread(target=self._watch, name='twin-stop', daemon=True)
+        self._watcher.start()
         self.get_logger().info(
             f'following with {settings.members} members, forecasts every '
             f"{values['forecast_period']:g} s over {', '.join(f'{h:g}' for h in horizons)} s")
+
+    def _watch(self) -> None:
+        """Stop the twin's computation once the context is shut down (SIGINT, SIGTERM)."""
+        while not self._done.wait(STOP_POLL):
+            if not self.context.ok():
+                self._follower.stop.request()
+                return
 
     # ------------------------------------------------------------------ inputs
 
@@ -200,6 +215,8 @@ class TwinNode(GuardedNode):
                                 f'({t - latest:.3f} s ahead of the newest input)')
             omega = cone_speed(t, list(msg['name']), [float(v) for v in msg['velocity']])
             taken = self._follower.cone_speed(t, omega)
+        except Stopped:
+            return
         except (TwinError, ValueError) as exc:
             self._refuse(str(exc))
             return
@@ -222,6 +239,8 @@ class TwinNode(GuardedNode):
             except ValueError:
                 del self._arrivals[t]  # refused by the twin: it will not be taken
                 raise
+        except Stopped:
+            return
         except (ConeFeederError, ValueError) as exc:
             self._refuse(str(exc))
             return
@@ -287,6 +306,9 @@ class TwinNode(GuardedNode):
 
     def destroy_node(self) -> None:
         """Close the recording (with its totals), then destroy the node's handles."""
+        done = getattr(self, '_done', None)
+        if done is not None:
+            done.set()
         try:
             recording = getattr(self, '_recording', None)
             if recording is not None:

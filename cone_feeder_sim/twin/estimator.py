@@ -46,12 +46,14 @@ import numpy as np
 from .association import associate, GATE_CHI2
 from .enkf import analyse
 from .particles import resample_parameters
+from ..errors import Stopped
 from ..physics.model import STATE_SIZE
 from ..physics.params import product_row, ProductParams
 from ..physics.rotation import rotate_z, RotationProfile
 from ..physics.simulation import (
     add_particles, advance_many, remove_particles, resting_height, SimParams, SimState,
-    world_from_cone)
+    StepResult, world_from_cone)
+from ..physics.stop import StopFlag
 
 __all__ = ['Frame', 'Twin', 'TwinSettings']
 
@@ -126,12 +128,19 @@ class Twin:
     """An ensemble of simulations that follows detected pieces (see the module)."""
 
     def __init__(self, params: SimParams, settings: TwinSettings = TwinSettings(),
-                 t0: float = 0.0) -> None:
+                 t0: float = 0.0, stop: StopFlag | None = None) -> None:
+        """
+        Start with no pieces at t0 (s).
+
+        stop: a request the members' integration reads between its steps; once it is set,
+        the computation under way raises Stopped within a step (a node's shutdown).
+        """
         if settings.members < 2:
             raise ValueError(f'members must be at least 2, got {settings.members}')
         if not settings.loosen >= 1.0:
             raise ValueError(f'loosen must be at least 1, got {settings.loosen}')
         self.params, self.settings = loosened(params, settings.loosen), settings
+        self.stop = stop or StopFlag()
         self.rng = np.random.default_rng(settings.seed)
         m = settings.members
         self.log_d = math.log(settings.d) + settings.d_spread * self.rng.standard_normal(m)
@@ -189,10 +198,24 @@ class Twin:
         del self.times[:first], self.omegas[:first]
         self._profile = RotationProfile(np.array(self.times), np.array(self.omegas))
 
+    def advance(self, states: list[SimState], t1: float,
+                profile: RotationProfile | None = None) -> list[StepResult]:
+        """
+        Advance members' states to t1 (s) under profile (default: the measured cone speed).
+
+        Raises Stopped when :attr:`stop` was requested meanwhile (the interval is dropped).
+        """
+        m = len(states)
+        results = advance_many(states, self.params, [profile or self._profile] * m, [t1] * m,
+                               self.stop)
+        if any(r.stopped for r in results):
+            raise Stopped('the twin was asked to stop')
+        return results
+
     def predict(self, t1: float) -> None:
         """Advance every member to t1 (s); pieces that left in most members are dropped."""
         m = len(self.states)
-        results = advance_many(self.states, self.params, [self._profile] * m, [t1] * m)
+        results = self.advance(self.states, t1)
         self.states = [r.state for r in results]
         gone: dict[int, int] = {}
         for r in results:
@@ -370,11 +393,9 @@ class Twin:
         base = replace(base, y=np.mean([s.y[self._rows(s, base.ids)]
                                         for s in self._window_states], axis=0))
         states = [self._with_products(base, k) for k in range(len(self._window_states))]
-        m = len(states)
         predicted, observed = [], []
         for t, ids, xy in self._window_frames:
-            results = advance_many(states, self.params, [self._profile] * m, [t] * m)
-            states = [r.state for r in results]
+            states = [r.state for r in self.advance(states, t)]
             held = ids[np.all([np.isin(ids, s.ids) for s in states], axis=0)]
             if not len(held):
                 continue

@@ -32,7 +32,6 @@ import numpy as np
 
 from .estimator import Twin
 from ..physics.rotation import RotationProfile
-from ..physics.simulation import advance_many
 
 __all__ = ['Forecast', 'forecast']
 
@@ -77,7 +76,7 @@ def forecast(twin: Twin, horizons: tuple[float, ...] = (0.5, 1.0, 2.0),
     h = np.asarray(sorted(horizons), dtype=float)
     m = len(twin.states)
     profile = rotation or twin.profile()
-    results = advance_many(twin.states, twin.params, [profile] * m, [t0 + h[-1]] * m)
+    results = twin.advance(twin.states, t0 + h[-1], profile)
     index = {int(i): k for k, i in enumerate(ids)}
     counts = np.zeros((len(ids), channels + 1))
     times = np.zeros(len(ids))

@@ -40,6 +40,7 @@ from .estimator import Frame, Twin, TwinSettings
 from .forecast import Forecast, forecast
 from .frames import DetectionFrame
 from ..physics.simulation import SimParams
+from ..physics.stop import StopFlag
 
 __all__ = ['Follower', 'LiveSettings', 'STATES']
 
@@ -69,6 +70,8 @@ class Follower:
     def __init__(self, params: SimParams, settings: LiveSettings = LiveSettings()) -> None:
         """Wait for the first input."""
         self.params, self.settings = params, settings
+        #: set it to stop the computation under way (it raises Stopped within a step)
+        self.stop = StopFlag()
         self.twin: Twin | None = None
         self.last_frame: float | None = None
         self.outlook: Forecast | None = None
@@ -96,7 +99,7 @@ class Follower:
 
     def _start(self, t: float) -> Twin:
         if self.twin is None:
-            self.twin = Twin(self.params, self.settings.twin, t0=t)
+            self.twin = Twin(self.params, self.settings.twin, t0=t, stop=self.stop)
             self._due = t
         return self.twin
 

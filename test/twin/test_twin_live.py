@@ -13,6 +13,7 @@
 # limitations under the License.
 """The twin frame by frame: a frame waits for its cone speed; the camera stops and returns."""
 
+from cone_feeder_sim.errors import Stopped
 from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
@@ -134,3 +135,18 @@ def test_a_frame_older_than_the_history_is_refused() -> None:
     with pytest.raises(ValueError, match='max_delay'):
         follower.frame(DetectionFrame(0.05, np.array([[0.1, 0.0]]), None, None))
     assert follower.t == 0.5
+
+
+def test_a_stop_request_ends_the_computation_under_way() -> None:
+    # twin_node's watcher sets the flag when a signal shuts its context down: the kernels
+    # read it between steps, and the frame's analysis ends with Stopped instead of finishing
+    frames = stream(0.2)
+    follower = Follower(PARAMS, LiveSettings(twin=TwinSettings(members=4)))
+    for t, omega, xy in frames[:3]:
+        follower.cone_speed(t, omega)
+        follower.frame(DetectionFrame(t, xy, None, None))
+    follower.stop.request()
+    t, omega, xy = frames[3]
+    follower.frame(DetectionFrame(t, xy, None, None))
+    with pytest.raises(Stopped):
+        follower.cone_speed(t, omega)
