@@ -32,6 +32,11 @@ detections the estimator
    ``death_after`` s, and the younger of two pieces within the gate of each other (deaths),
    and pieces that left the cone in most members (exits).
 
+A piece born from one detection is tentative (a false detection is one too) until it was
+seen in ``confirm`` frames; a tentative piece not seen for ``tentative_after`` s dies. Only
+confirmed pieces are in :meth:`Twin.pieces` and in the forecasts (the M-of-N confirmation
+of multi-target tracking).
+
 Detections are world-frame positions; the cone axes turn with the cone by the angle all
 members share, so a detection is turned into cone axes before the analysis (the noise is
 isotropic in x, y, so its covariance does not change).
@@ -81,7 +86,9 @@ class TwinSettings:
     window: d and mu_C are weighed once per window of this many seconds, against every
     detection of the window at once (a particle step: each member run again over the
     window with its own parameters), instead of frame by frame; 0: frame by frame, by the
-    Kalman update with the pieces' states (overconfident: doc/twin.md).
+    Kalman update with the pieces' states (overconfident: doc/twin.md); confirm: the
+    frames in which a new piece must be seen before it counts (1: at once);
+    tentative_after: a piece not yet confirmed and not seen for this long (s) is dropped.
     """
 
     members: int = 32
@@ -96,6 +103,8 @@ class TwinSettings:
     seed: int = 0
     loosen: float = 10.0
     window: float = 0.5
+    confirm: int = 3
+    tentative_after: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -135,6 +144,8 @@ class Twin:
         stop: a request the members' integration reads between its steps; once it is set,
         the computation under way raises Stopped within a step (a node's shutdown).
         """
+        if settings.confirm < 1:
+            raise ValueError(f'confirm must be at least 1, got {settings.confirm}')
         if settings.members < 2:
             raise ValueError(f'members must be at least 2, got {settings.members}')
         if not settings.loosen >= 1.0:
@@ -150,6 +161,8 @@ class Twin:
         self._profile = RotationProfile(np.array(self.times), np.array(self.omegas))
         self.masses: dict[int, float] = {}
         self.last_seen: dict[int, float] = {}
+        #: the frames each piece was seen in, up to settings.confirm (confirmed there)
+        self.hits: dict[int, int] = {}
         self._exits: list[int] = []
         self._drifted = t0
         self._window_t0 = t0
@@ -165,6 +178,7 @@ class Twin:
         other.rng = copy.deepcopy(self.rng)
         other.times, other.omegas = list(self.times), list(self.omegas)
         other.masses, other.last_seen = dict(self.masses), dict(self.last_seen)
+        other.hits = dict(self.hits)
         other._exits = list(self._exits)
         other._window_states = list(self._window_states)
         other._window_frames = list(self._window_frames)
@@ -224,13 +238,17 @@ class Twin:
         self._exits = [i for i, count in gone.items() if 2 * count > m]
         self._drop(self._exits)
 
-    def pieces(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def pieces(self, tentative: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
         Return the pieces every member holds: ids (n,), mean world x, y (n, 2) (m), spread.
 
-        spread: (n, 2, 2) the members' covariance of x, y (m^2).
+        spread: (n, 2, 2) the members' covariance of x, y (m^2). tentative: also the pieces
+        not yet confirmed (see the module).
         """
         ids = self._common()
+        if not tentative:
+            confirm = self.settings.confirm
+            ids = ids[[self.hits.get(int(i), 0) >= confirm for i in ids.tolist()]]
         if not len(ids):
             return ids, np.zeros((0, 2)), np.zeros((0, 2, 2))
         omega = self._profile.omega(self.t)
@@ -263,7 +281,7 @@ class Twin:
         exits = len(self._exits)
         self._exits = []
         self._drift(t)
-        ids, mean, spread = self.pieces()
+        ids, mean, spread = self.pieces(tentative=True)
         sigma = self.settings.sigma
         noise = np.eye(2) * sigma ** 2
         match = associate(mean, spread + noise, detections[:, :2])
@@ -271,7 +289,9 @@ class Twin:
         if len(match.pairs):
             nis, observed = self._analyse(ids, match.pairs, detections[:, :2])
             for piece, _ in match.pairs:
-                self.last_seen[int(ids[piece])] = t
+                i = int(ids[piece])
+                self.last_seen[i] = t
+                self.hits[i] = min(self.hits.get(i, 0) + 1, self.settings.confirm)
             self._window_frames.append((t, ids[match.pairs[:, 0]],
                                         detections[match.pairs[:, 1], :2]))
         # a detection left over is a birth, unless it is within 3 sigma of the rim (a piece
@@ -282,8 +302,11 @@ class Twin:
         if len(born):
             weights = None if masses is None else np.asarray(masses, dtype=float)[born]
             self._birth(detections[born, :2], weights, t)
+        confirm, settings = self.settings.confirm, self.settings
         dead = [i for i in ids.tolist()
-                if t - self.last_seen.get(i, t) > self.settings.death_after]
+                if t - self.last_seen.get(i, t) > (settings.death_after
+                                                   if self.hits.get(i, 0) >= confirm
+                                                   else settings.tentative_after)]
         self._drop(dead)
         dead += self._merge()
         if self.settings.window > 0.0 and t - self._window_t0 >= self.settings.window - 1e-9:
@@ -299,7 +322,7 @@ class Twin:
         Two of the twin's pieces where the camera sees one (a piece the gate missed for a
         frame is born again) would take its detections in turn, and neither would die.
         """
-        ids, mean, spread = self.pieces()
+        ids, mean, spread = self.pieces(tentative=True)
         noise = 2.0 * self.settings.sigma ** 2 * np.eye(2)
         dropped: list[int] = []
         apart = np.hypot(*(mean[:, None, :] - mean[None, :, :]).transpose(2, 0, 1))
@@ -442,12 +465,14 @@ class Twin:
             assert i == first + k  # every member numbers its pieces alike
             self.masses[i] = weights[k]
             self.last_seen[i] = t
+            self.hits[i] = 1
 
     def _drop(self, ids: list[int]) -> None:
         if ids:
             self.states = [remove_particles(s, ids) for s in self.states]
         for i in ids:
             self.last_seen.pop(i, None)
+            self.hits.pop(i, None)
 
     def _drift(self, t: float) -> None:
         elapsed = max(t - self._drifted, 0.0)

@@ -86,12 +86,13 @@ def forecast(twin: Twin, horizons: tuple[float, ...] = (0.5, 1.0, 2.0),
         exits = result.exits
         for i, t, c, w in zip(exits.ids.tolist(), exits.t.tolist(), exits.channel.tolist(),
                               exits.mass.tolist()):
-            mass[member, :, c - 1] += w * (t <= t0 + h)
             k = index.get(i)
-            if k is not None:
-                counts[k, c] += 1
-                times[k] += t
-                left[k] += 1
+            if k is None:  # a tentative piece (twin.pieces): not counted until confirmed
+                continue
+            mass[member, :, c - 1] += w * (t <= t0 + h)
+            counts[k, c] += 1
+            times[k] += t
+            left[k] += 1
     counts[:, 0] = m - left
     exit_time = np.where(left > 0, times / np.maximum(left, 1), np.nan)
     return Forecast(t=t0, ids=ids, channel_probability=counts / m, exit_time=exit_time,

@@ -65,7 +65,10 @@ def test_pieces_are_born_once_and_then_followed(followed: tuple) -> None:
     assert frames[0][0].births == 5  # the first frame: every piece is new
     assert sum(frame.births for frame, _, _ in frames[1:]) == 0
     assert all(frame.associated == count for frame, count, _ in frames[1:])
-    assert max(error for _, _, error in frames[1:]) < 5.0 * SIGMA
+    # shown once seen in `confirm` frames (3): tentative before
+    confirm = TwinSettings().confirm
+    assert all(error == np.inf for _, _, error in frames[:confirm - 1])
+    assert max(error for _, _, error in frames[confirm - 1:]) < 5.0 * SIGMA
 
 
 def test_the_innovations_are_consistent_with_the_reported_spread(followed: tuple) -> None:
@@ -86,6 +89,19 @@ def test_a_piece_that_leaves_the_plant_leaves_the_twin(followed: tuple) -> None:
     assert len(twin.pieces()[0]) == frames[-1][1]
 
 
+def test_a_false_detection_is_never_shown_and_dies_soon() -> None:
+    twin = Twin(PARAMS, TwinSettings(members=4, sigma=SIGMA))
+    piece, ghost = [0.1, 0.0], [-0.1, 0.05]
+    shown = []
+    for k in range(1, 9):
+        twin.cone_speed(k / 30.0, 0.0)
+        frame = twin.update(k / 30.0, np.array([piece, ghost] if k == 1 else [piece]))
+        shown.append(len(twin.pieces()[0]))
+        if k == 5:  # tentative_after (0.1 s) without a detection: dropped
+            assert frame.deaths == 1 and len(twin.pieces(tentative=True)[0]) == 1
+    assert shown == [0, 0, 1, 1, 1, 1, 1, 1]  # the piece confirmed at its third frame
+
+
 def test_bad_input_is_refused_with_its_reason() -> None:
     twin = Twin(PARAMS, TwinSettings(members=4))
     twin.update(0.1, np.array([[0.1, 0.0]]))
@@ -97,3 +113,5 @@ def test_bad_input_is_refused_with_its_reason() -> None:
         twin.cone_speed(-1.0, 1.0)
     with pytest.raises(ValueError, match='at least 2'):
         Twin(PARAMS, TwinSettings(members=1))
+    with pytest.raises(ValueError, match='confirm must be at least 1'):
+        Twin(PARAMS, TwinSettings(confirm=0))

@@ -13,8 +13,10 @@
 # limitations under the License.
 """The twin frame by frame: a frame waits for its cone speed; the camera stops and returns."""
 
+from dataclasses import replace
+
 from cone_feeder_sim.errors import Stopped
-from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.params import InteractionParams, ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
@@ -23,6 +25,7 @@ from cone_feeder_sim.twin.frames import DetectionFrame
 from cone_feeder_sim.twin.live import Follower, LiveSettings
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 MODEL = ModelParams()
 PARAMS = SimParams(model=MODEL)
@@ -124,6 +127,87 @@ def test_late_frames_give_what_the_frames_in_order_give() -> None:
     assert np.array_equal(ours.pieces()[1], theirs.pieces()[1])
     assert ours.parameters() == theirs.parameters()
     assert np.array_equal(ours.states[3].y, theirs.states[3].y)
+
+
+def camera(seconds: float, seed: int) -> list[tuple[float, float, DetectionFrame, np.ndarray]]:
+    """
+    Return a hard plant's (t, cone speed, frame, true x, y) at 30 frames/s.
+
+    The plant: six pieces, two pairs of them in contact (the pair law on), a product other
+    than the twin's prior (d 315, mu_C 0.78), the cone reversing twice. The camera: 1.5 mm
+    of noise, 10 % of the pieces missed, a false detection in 30 % of the frames, track ids
+    shuffled in every frame.
+    """
+    rng = np.random.default_rng(seed)
+    model = replace(MODEL, product=replace(MODEL.product, d=315.0, mu_C=0.78),
+                    interactions=InteractionParams(enabled=True))
+    params = SimParams(model=model)
+    profile = RotationProfile.from_table([[0.0, 0.0], [0.5, 5.0], [1.5, 5.0], [2.0, -5.0],
+                                          [3.0, -5.0], [3.5, 5.0]])
+    touch = 2.0 * 0.98 * model.product.s0  # 2 % of a diameter overlapping
+    places = [[0.10, 0.02], [0.10, 0.02 + touch], [-0.08, 0.09], [0.03, -0.13],
+              [0.03 + touch, -0.13], [-0.12, -0.05]]
+    q = np.array([[x, y, resting_height(model, model.product, x, y)] for x, y in places])
+    plant, _ = add_particles(SimState(), params, q)
+    out = []
+    for k in range(1, int(round(30 * seconds)) + 1):
+        t = k / 30.0
+        plant = advance(plant, params, profile, t).state
+        seen, _, _ = world_from_cone(plant.y, plant.angle, profile.omega(t))
+        kept = rng.random(plant.count) > 0.1
+        xy = seen[kept, :2] + rng.normal(0.0, 0.0015, (int(kept.sum()), 2))
+        ids = plant.ids[kept].astype(np.uint32)
+        if rng.random() < 0.3:
+            r, a = 0.25 * np.sqrt(rng.random()), 2.0 * np.pi * rng.random()
+            xy = np.vstack([xy, [r * np.cos(a), r * np.sin(a)]])
+            ids = np.append(ids, np.uint32(999))
+        order = rng.permutation(len(xy))
+        out.append((t, profile.omega(t), DetectionFrame(t, xy[order], None, ids[order]),
+                    seen[:, :2]))
+    return out
+
+
+def test_a_hard_plant_is_followed_with_consistent_innovations() -> None:
+    # misses, false detections, swapped ids, pieces in contact and every fifth frame two
+    # frames late: after half a second, the twin holds the plant's pieces and no others,
+    # within 5 mm, and its innovations are chi-square with their degrees of freedom
+    # (measured: NIS 910 for 908 from 0.5 s; the twin without the pair law)
+    follower = Follower(PARAMS, LiveSettings(
+        twin=TwinSettings(members=16, sigma=0.0015, seed=2), forecast_period=0.5))
+    held: list[DetectionFrame] = []
+    nis, observed, counts = 0.0, 0, []
+    for k, (t, omega, found, truth) in enumerate(camera(4.0, 11), start=1):
+        follower.cone_speed(t, omega)
+        if k % 5 == 2:
+            held.append(found)
+            continue
+        if follower.frame(found) == [t] and t > 0.5:  # in order: one analysis each
+            nis += follower.last.nis
+            observed += follower.last.observed
+        if held and k % 5 == 4:
+            late = held.pop()
+            assert follower.frame(late) == [late.t]  # and the two frames after it again
+        if t > 0.5:
+            ids, mean, _ = follower.twin.pieces()
+            error = np.linalg.norm(mean[:, None, :] - truth[None, :, :], axis=2)
+            counts.append(len(ids) == len(truth))
+            assert error.min(axis=0).max() < 0.005 and error.min(axis=1).max() < 0.005
+    assert np.mean(counts) > 0.95
+    assert observed > 600
+    assert chi2.ppf(5e-4, observed) < nis < chi2.ppf(1.0 - 5e-4, observed)
+
+
+def test_swapped_or_absent_track_ids_give_the_same_twin() -> None:
+    # the association is by position alone: a camera's ids that swap cannot mislead it
+    twins = []
+    for ids in (True, False):
+        follower = Follower(PARAMS, LiveSettings(twin=TwinSettings(members=4, seed=1)))
+        for t, omega, found, _ in camera(1.0, 4):
+            follower.cone_speed(t, omega)
+            follower.frame(found if ids else replace(found, track_ids=None))
+        twins.append(follower.twin)
+    assert np.array_equal(twins[0].pieces()[1], twins[1].pieces()[1])
+    assert twins[0].parameters() == twins[1].parameters()
 
 
 def test_a_frame_older_than_the_history_is_refused() -> None:
