@@ -60,7 +60,7 @@ from ..physics.simulation import (
     StepResult, world_from_cone)
 from ..physics.stop import StopFlag
 
-__all__ = ['Frame', 'Twin', 'TwinSettings']
+__all__ = ['Exit', 'Frame', 'Twin', 'TwinSettings']
 
 #: The ranges the members' parameters are held in: log d (d in N*s/m) and mu_C.
 LOG_D_RANGE = (math.log(1.0), math.log(1.0e4))
@@ -108,12 +108,24 @@ class TwinSettings:
 
 
 @dataclass(frozen=True)
+class Exit:
+    """An exit the twin saw: the piece, t (s), the channel (1-based), the mass (kg)."""
+
+    piece: int
+    t: float
+    channel: int
+    mass: float
+
+
+@dataclass(frozen=True)
 class Frame:
     """
     What one frame of detections did.
 
-    t (s); associated, births, deaths, exits: counts; nis: the analysis's normalised
-    innovation squared and observed: its degrees of freedom (2 per associated piece).
+    t (s); associated, births, deaths, exits: counts (exits: pieces that left the cone in
+    most members since the frame before; left: those of them confirmed, :class:`Exit`); nis:
+    the analysis's normalised innovation squared and observed: its degrees of freedom (2
+    per associated piece).
     """
 
     t: float
@@ -123,6 +135,7 @@ class Frame:
     exits: int
     nis: float
     observed: int
+    left: tuple[Exit, ...] = ()
 
 
 def loosened(params: SimParams, factor: float) -> SimParams:
@@ -163,7 +176,10 @@ class Twin:
         self.last_seen: dict[int, float] = {}
         #: the frames each piece was seen in, up to settings.confirm (confirmed there)
         self.hits: dict[int, int] = {}
+        #: the pieces the predictions since the last frame dropped as gone, and the exits
+        #: among them the twin saw (confirmed pieces)
         self._exits: list[int] = []
+        self._left: list[Exit] = []
         self._drifted = t0
         self._window_t0 = t0
         self._window_states = list(self.states)
@@ -179,7 +195,7 @@ class Twin:
         other.times, other.omegas = list(self.times), list(self.omegas)
         other.masses, other.last_seen = dict(self.masses), dict(self.last_seen)
         other.hits = dict(self.hits)
-        other._exits = list(self._exits)
+        other._exits, other._left = list(self._exits), list(self._left)
         other._window_states = list(self._window_states)
         other._window_frames = list(self._window_frames)
         return other
@@ -227,16 +243,32 @@ class Twin:
         return results
 
     def predict(self, t1: float) -> None:
-        """Advance every member to t1 (s); pieces that left in most members are dropped."""
+        """
+        Advance every member to t1 (s); pieces that left in most members are dropped.
+
+        Each confirmed piece dropped so is an exit the twin saw (:attr:`Frame.left`): the
+        members' mean exit time, the channel most of them give, the piece's mass.
+        """
         m = len(self.states)
         results = self.advance(self.states, t1)
         self.states = [r.state for r in results]
         gone: dict[int, int] = {}
+        seen: dict[int, list[tuple[float, int]]] = {}
         for r in results:
             for i in r.exits.ids.tolist() + [f.particle_id for f in r.failures]:
                 gone[i] = gone.get(i, 0) + 1
-        self._exits = [i for i, count in gone.items() if 2 * count > m]
-        self._drop(self._exits)
+            for i, t, c in zip(r.exits.ids.tolist(), r.exits.t.tolist(),
+                               r.exits.channel.tolist()):
+                seen.setdefault(i, []).append((t, c))
+        dropped = [i for i, count in gone.items() if 2 * count > m]
+        self._exits += dropped
+        for i in dropped:
+            if i in seen and self.hits.get(i, 0) >= self.settings.confirm:
+                times, channels = zip(*seen[i])
+                self._left.append(Exit(piece=i, t=float(np.mean(times)),
+                                       channel=int(np.bincount(channels).argmax()),
+                                       mass=self.masses[i]))
+        self._drop(dropped)
 
     def pieces(self, tentative: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
@@ -278,8 +310,8 @@ class Twin:
             raise ValueError(f'detections at t = {t} s are older than the twin ({self.t} s)')
         if t > self.t:
             self.predict(t)
-        exits = len(self._exits)
-        self._exits = []
+        exits, seen_leaving = len(self._exits), tuple(self._left)
+        self._exits, self._left = [], []
         self._drift(t)
         ids, mean, spread = self.pieces(tentative=True)
         sigma = self.settings.sigma
@@ -297,8 +329,8 @@ class Twin:
         # a detection left over is a birth, unless it is within 3 sigma of the rim (a piece
         # leaving, or a false detection there: no member could hold it on the cone)
         rim = self.params.model.r - 3.0 * sigma
-        left = match.unassigned
-        born = left[np.hypot(detections[left, 0], detections[left, 1]) < rim]
+        spare = match.unassigned
+        born = spare[np.hypot(detections[spare, 0], detections[spare, 1]) < rim]
         if len(born):
             weights = None if masses is None else np.asarray(masses, dtype=float)[born]
             self._birth(detections[born, :2], weights, t)
@@ -313,7 +345,7 @@ class Twin:
             self._smooth()
             self._window_t0, self._window_states, self._window_frames = t, self.states, []
         return Frame(t=t, associated=len(match.pairs), births=len(born), deaths=len(dead),
-                     exits=exits, nis=nis, observed=observed)
+                     exits=exits, nis=nis, observed=observed, left=seen_leaving)
 
     def _merge(self) -> list[int]:
         """

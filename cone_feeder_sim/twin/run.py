@@ -26,7 +26,11 @@ the twin goes on; so is a cone speed that is not finite. The output directory ge
   -, -, s; exit_time empty where no member lets the piece leave);
 - ``parameters.csv``: t, key, estimate, spread;
 - ``frames.csv``: t, detections, associated, births, deaths, exits, nis, observed (the
-  diagnostics; nis over observed is the consistency test).
+  diagnostics; nis over observed is the consistency test);
+- ``exits.csv``: t, piece, channel, mass (s, -, -, kg): the exits the twin saw, each piece
+  followed to the rim (:class:`.estimator.Exit`): what the forecasts are scored against;
+- ``report.png``: the one-page report (:mod:`.figure`): forecast error against lead time,
+  the parameters' traces, the consistency test over time.
 """
 
 from collections.abc import Callable
@@ -38,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from .estimator import Twin, TwinSettings
+from .figure import write_report
 from .forecast import forecast
 from .frames import detection_frame
 from .spec import TwinSpec
@@ -53,6 +58,7 @@ FILES = {
     'parameters.csv': ('t', 'key', 'estimate', 'spread'),
     'frames.csv': ('t', 'detections', 'associated', 'births', 'deaths', 'exits', 'nis',
                    'observed'),
+    'exits.csv': ('t', 'piece', 'channel', 'mass'),
 }
 
 
@@ -117,11 +123,15 @@ def run_twin(spec: TwinSpec, out: Path,
             writers['frames.csv'].writerow([f'{t:.6f}', len(rows), frame.associated,
                                             frame.births, frame.deaths, frame.exits,
                                             f'{frame.nis:.6g}', frame.observed])
+            for left in frame.left:
+                writers['exits.csv'].writerow([f'{left.t:.6f}', left.piece, left.channel,
+                                               f'{left.mass:.6g}'])
             if t + 1e-9 >= due:
                 _write_forecast(twin, spec, writers)
                 forecasts += 1
                 while due <= t + 1e-9:
                     due += spec.every
+    write_report(out)
     return TwinSummary(frames=frames, refused=refused, forecasts=forecasts, nis=nis,
                        observed=observed)
 

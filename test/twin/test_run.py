@@ -95,6 +95,8 @@ def test_the_command_writes_the_forecasts(tmp_path: Path,
     assert {r['key'] for r in parameters} == {'d', 'mu_C'} and len(parameters) == 30
     frames = read(out / 'frames.csv')
     assert len(frames) == 45 and int(frames[0]['births']) == 5
+    report = (out / 'report.png').read_bytes()
+    assert report[:8] == b'\x89PNG\r\n\x1a\n' and len(report) > 20000
     assert all(int(f['associated']) == int(f['detections']) for f in frames[1:])
 
 
