@@ -340,19 +340,27 @@ class Twin:
                                                    if self.hits.get(i, 0) >= confirm
                                                    else settings.tentative_after)]
         self._drop(dead)
-        dead += self._merge()
+        dead += self._merge(t)
         if self.settings.window > 0.0 and t - self._window_t0 >= self.settings.window - 1e-9:
             self._smooth()
             self._window_t0, self._window_states, self._window_frames = t, self.states, []
         return Frame(t=t, associated=len(match.pairs), births=len(born), deaths=len(dead),
                      exits=exits, nis=nis, observed=observed, left=seen_leaving)
 
-    def _merge(self) -> list[int]:
+    def _merge(self, t: float) -> list[int]:
         """
-        Drop the younger of two pieces within the gate of each other; return the dropped.
+        Drop one of two pieces within the gate of each other, not both seen at t.
+
+        The one seen in fewer frames goes (a tentative piece), else the one not seen at t,
+        else the younger. Return the dropped.
 
         Two of the twin's pieces where the camera sees one (a piece the gate missed for a
-        frame is born again) would take its detections in turn, and neither would die.
+        frame is born again) would take its detections in turn, and neither would die. Two
+        pieces that both took a detection are two pieces, however close (pieces touching
+        on the cone: measured on 30 pieces without contact, where a tenth of them overlap,
+        dropping the younger of any close pair bore 70 pieces a second again). A confirmed
+        piece the camera missed next to a false detection is kept (the hard plant of
+        test_twin_live.py lost one so).
         """
         ids, mean, spread = self.pieces(tentative=True)
         noise = 2.0 * self.settings.sigma ** 2 * np.eye(2)
@@ -361,9 +369,14 @@ class Twin:
         near = np.argwhere(np.triu(apart < 10.0 * self.settings.sigma + 1e-3, k=1))
         for a, b in near:  # a cheap prefilter, then the gate (pairs in id order: a < b)
             d = mean[b] - mean[a]
-            if (int(ids[a]) not in dropped and int(ids[b]) not in dropped
-                    and d @ np.linalg.solve(spread[a] + spread[b] + noise, d) < GATE_CHI2):
-                dropped.append(int(ids[b]))
+            i, j = int(ids[a]), int(ids[b])
+            seen_i, seen_j = self.last_seen.get(i) == t, self.last_seen.get(j) == t
+            if (i in dropped or j in dropped or (seen_i and seen_j)
+                    or d @ np.linalg.solve(spread[a] + spread[b] + noise, d) >= GATE_CHI2):
+                continue
+            rank_i = (self.hits.get(i, 0), seen_i, -i)  # the lower rank goes (i < j: older)
+            rank_j = (self.hits.get(j, 0), seen_j, -j)
+            dropped.append(i if rank_i < rank_j else j)
         self._drop(dropped)
         return dropped
 
@@ -394,7 +407,8 @@ class Twin:
         columns = np.concatenate([STATE_SIZE * pairs[:, 0], STATE_SIZE * pairs[:, 0] + 1])
         values = np.concatenate([seen[:, 0], seen[:, 1]])
         sigma = np.full(len(columns), self.settings.sigma)
-        result = analyse(ensemble, columns, values, sigma, self.rng)
+        groups = np.concatenate([np.repeat(np.arange(n), STATE_SIZE), [-1, -1]])
+        result = analyse(ensemble, columns, values, sigma, self.rng, groups)
         if self.settings.window <= 0.0:  # else the smoother analyses them, once a window
             self.log_d = np.clip(result.ensemble[:, width], *LOG_D_RANGE)
             self.mu_c = np.clip(result.ensemble[:, width + 1], *MU_C_RANGE)

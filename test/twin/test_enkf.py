@@ -91,6 +91,35 @@ def test_nothing_observed_leaves_the_ensemble() -> None:
     assert (result.nis, result.observed) == (0.0, 0)
 
 
+def test_localized_groups_are_analysed_apart() -> None:
+    # two pieces (components 0-1 and 2-3) that a small ensemble makes look correlated, and a
+    # parameter (4, no group): observing piece 0 moves piece 0 and the parameter exactly as
+    # an analysis of them alone would, and leaves piece 1 as it was
+    rng = np.random.default_rng(8)
+    ensemble = rng.standard_normal((6, 5)) * 1e-3
+    ensemble[:, 2] += 0.9 * ensemble[:, 0]  # a spurious correlation between the pieces
+    groups = np.array([0, 0, 1, 1, -1])
+    columns, values, sigma = np.array([0]), np.array([2e-3]), np.array([1e-3])
+    local = analyse(ensemble, columns, values, sigma, np.random.default_rng(1), groups)
+    alone = analyse(ensemble[:, [0, 1, 4]], columns, values, sigma, np.random.default_rng(1))
+    np.testing.assert_allclose(local.ensemble[:, [0, 1, 4]], alone.ensemble, rtol=1e-12)
+    np.testing.assert_array_equal(local.ensemble[:, 2:4], ensemble[:, 2:4])
+    assert local.nis == pytest.approx(alone.nis, rel=1e-12)
+    # unlocalized, the spurious correlation moves piece 1
+    everything = analyse(ensemble, columns, values, sigma, np.random.default_rng(1))
+    assert np.abs(everything.ensemble[:, 2] - ensemble[:, 2]).max() > 1e-4
+    # two observations of different groups: their innovations are weighed apart
+    both = analyse(ensemble, np.array([0, 2]), np.array([2e-3, -1e-3]), np.array([1e-3] * 2),
+                   np.random.default_rng(1), groups)
+    first = analyse(ensemble[:, :2], np.array([0]), np.array([2e-3]), np.array([1e-3]),
+                    np.random.default_rng(2))
+    second = analyse(ensemble[:, 2:4], np.array([0]), np.array([-1e-3]), np.array([1e-3]),
+                     np.random.default_rng(2))
+    assert both.nis == pytest.approx(first.nis + second.nis, rel=1e-12)
+    with pytest.raises(ValueError, match='one entry per state component'):
+        analyse(ensemble, columns, values, sigma, np.random.default_rng(1), groups[:3])
+
+
 @pytest.mark.parametrize(('members', 'columns', 'message'), [
     (1, COLUMNS, 'at least 2 members, got 1'),
     (5, np.array([0]), 'one entry per observation'),
