@@ -62,7 +62,7 @@ from ..formats.runlog import run_metadata
 from ..formats.topics import TWIN_TOPICS
 from ..physics.params import Limit, SolverParams
 from ..physics.simulation import SimParams
-from ..twin.estimator import TwinSettings
+from ..twin.estimator import TUNING, TwinSettings
 from ..twin.frames import cone_speed, detection_frame, MAX_FUTURE
 from ..twin.live import Follower, LiveSettings
 from ..twin.messages import channel_forecast_message, parameters_message, pieces_message
@@ -93,6 +93,16 @@ TWIN_PARAMETERS = (
     ParamSpec('loosen', 10.0, "the solver's tolerances times this for the members",
               limit=Limit(1.0, 1.0e6, '')),
     ParamSpec('seed', 0, "the ensemble's seed", limit=Limit(0, 2 ** 31 - 1, '')),
+    ParamSpec('drift', 0.05, "d's and mu_C's random walk per sqrt(s) (relative for d)",
+              limit=Limit(0.0, 10.0, '')),
+    ParamSpec('inflation', 1.1, "the pieces' deviations from the members' mean times this "
+              'before each analysis', limit=Limit(1.0, 10.0, '')),
+    ParamSpec('window', 0.5, 'd and mu_C weighed once per window of this many s (0: frame '
+              'by frame)', limit=Limit(0.0, 60.0, 's')),
+    ParamSpec('confirm', 3, 'the frames a new piece must be seen in before it counts',
+              limit=Limit(1, 1000, '')),
+    ParamSpec('tentative_after', 0.1, 'a piece not yet confirmed and not seen for this long '
+              '(s) is dropped', limit=Limit(0.0, 3600.0, 's')),
 )
 #: How often (s) the watcher looks whether the context was shut down.
 STOP_POLL = 0.05
@@ -137,9 +147,8 @@ class TwinNode(GuardedNode):
                                  if name.startswith('solver.')})
         settings = TwinSettings(
             members=int(values['members']), sigma=float(values['sigma']), d=model.product.d,
-            d_spread=float(values['d_spread']), mu_C=model.product.mu_C,
-            mu_C_spread=float(values['mu_C_spread']), death_after=float(values['death_after']),
-            seed=int(values['seed']), loosen=float(values['loosen']))
+            mu_C=model.product.mu_C, seed=int(values['seed']),
+            **{key: type(low)(values[key]) for key, low in TUNING.items()})
         self._model = model
         self._follower = Follower(SimParams(model=model, solver=solver), LiveSettings(
             twin=settings, horizons=horizons, forecast_period=float(values['forecast_period']),

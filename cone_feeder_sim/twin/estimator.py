@@ -60,7 +60,7 @@ from ..physics.simulation import (
     StepResult, world_from_cone)
 from ..physics.stop import StopFlag
 
-__all__ = ['Exit', 'Frame', 'Twin', 'TwinSettings']
+__all__ = ['Exit', 'Frame', 'TUNING', 'Twin', 'TwinSettings']
 
 #: The ranges the members' parameters are held in: log d (d in N*s/m) and mu_C.
 LOG_D_RANGE = (math.log(1.0), math.log(1.0e4))
@@ -105,6 +105,13 @@ class TwinSettings:
     window: float = 0.5
     confirm: int = 3
     tentative_after: float = 0.1
+
+
+#: The settings besides members, sigma, seed, d and mu_C (a twin file's keys and twin_node's
+#: parameters of the same names): their lower bounds; an int bound: an integer setting.
+TUNING = {'d_spread': 0.0, 'mu_C_spread': 0.0, 'drift': 0.0, 'inflation': 1.0,
+          'death_after': 0.0, 'loosen': 1.0, 'window': 0.0, 'confirm': 1,
+          'tentative_after': 0.0}
 
 
 @dataclass(frozen=True)

@@ -82,7 +82,7 @@ def run_twin(spec: TwinSpec, out: Path,
     firsts = [table[0, 0] for table in (spec.detections, spec.cone) if len(table)]
     twin = Twin(SimParams(model=scenario.model, solver=scenario.solver),
                 TwinSettings(members=spec.members, sigma=spec.sigma, d=product.d,
-                             mu_C=product.mu_C, seed=spec.seed),
+                             mu_C=product.mu_C, seed=spec.seed, **spec.tuning),
                 t0=float(min(firsts, default=0.0)))
     stamps, starts = np.unique(spec.detections[:, 0], return_index=True)
     ends = list(starts[1:]) + [len(spec.detections)]

@@ -29,6 +29,12 @@ A twin file is a YAML mapping::
     horizons: [0.5, 1.0, 2.0]  # forecast horizons (s)
     every: 0.1                 # forecast every (s)
     seed: 0
+    # and the estimator's other settings (estimator.TwinSettings, its defaults): d_spread,
+    # mu_C_spread, drift, inflation, death_after, loosen, window, confirm, tentative_after
+
+The settings are twin_node's parameters of the same names, so that a twin_node recording
+run again headless with the node's settings gives the node's estimates (seeded; checked in
+test/ros/test_twin_node.py).
 
 Paths are relative to the twin file. Errors name the key, the file and the row. A
 detection that is not finite (nan, inf) is read, and its frame refused when the twin gets
@@ -36,13 +42,14 @@ to it: the rest of the stream goes on.
 """
 
 import csv
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .estimator import TUNING
 from .streams import mcap_cone, mcap_detections
 from ..errors import ConeFeederError, TwinError
 from ..feeder.scenario import Scenario
@@ -52,7 +59,7 @@ from ..formats.scenario_file import load_scenario
 __all__ = ['load_twin', 'TwinSpec', 'TWIN_KEYS']
 
 TWIN_KEYS = ('scenario', 'detections', 'cone', 'members', 'sigma', 'horizons', 'every', 'seed',
-             'detections_topic', 'cone_topic')
+             'detections_topic', 'cone_topic', *TUNING)
 
 
 @dataclass(frozen=True)
@@ -62,7 +69,8 @@ class TwinSpec:
 
     scenario: the machine and the product prior; detections: (k, 4) rows t (s), x, y (m),
     mass (kg, NaN: not given), sorted by t (z and track_id are not read); cone: (j, 2) rows
-    t (s), omega (rad/s), sorted; members, sigma (m), horizons (s), every (s), seed as in the file.
+    t (s), omega (rad/s), sorted; members, sigma (m), horizons (s), every (s), seed as in the file;
+    tuning: the other estimator settings the file sets (:data:`TUNING`).
     """
 
     scenario: Scenario
@@ -73,6 +81,7 @@ class TwinSpec:
     horizons: tuple[float, ...] = (0.5, 1.0, 2.0)
     every: float = 0.1
     seed: int = 0
+    tuning: dict[str, float] = field(default_factory=dict)
 
 
 def _rows(path: Path, columns: tuple[str, ...], optional: tuple[str, ...]) -> np.ndarray:
@@ -152,4 +161,6 @@ def load_twin(path: str | Path) -> TwinSpec:
         sigma=float(_number(content, 'sigma', 0.002, 1e-6)),
         horizons=tuple(sorted(float(h) for h in horizons)),
         every=float(_number(content, 'every', 0.1, 1e-3)),
-        seed=_number(content, 'seed', 0, 0, integer=True))
+        seed=_number(content, 'seed', 0, 0, integer=True),
+        tuning={key: _number(content, key, None, low, integer=isinstance(low, int))
+                for key, low in TUNING.items() if key in content})

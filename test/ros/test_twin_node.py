@@ -14,6 +14,8 @@
 
 """twin_node in process: a simulated plant's detections in, the twin's estimates out."""
 
+import csv
+from dataclasses import fields
 from pathlib import Path
 import time
 from typing import Any
@@ -26,14 +28,19 @@ from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
-from cone_feeder_sim.ros.twin_node import TwinNode
+from cone_feeder_sim.ros.twin_node import twin_parameter_specs, TwinNode
+from cone_feeder_sim.twin.estimator import TUNING, TwinSettings
+from cone_feeder_sim.twin.run import run_twin
+from cone_feeder_sim.twin.spec import load_twin
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
+import pytest
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, PointCloud2
 from std_msgs.msg import Float64MultiArray
+import yaml
 
 MODEL = ModelParams()
 PARAMS = SimParams(model=MODEL)
@@ -129,6 +136,36 @@ def test_the_twin_follows_the_plant_and_forecasts(context: Any, tmp_path: Path) 
     assert topics['/detections'].message_count == 30
     assert topics['/cone_state'].message_count == 30
     assert topics['/twin/pieces'].message_count == 30
+    # the recording run again headless, with the node's settings: the node's estimates
+    (tmp_path / 'scenario.yaml').write_text(yaml.safe_dump(
+        {'duration': 1.0, 'rotation': [[0.0, 0.0]],
+         'particles': [{'position': [0.1, 0.0, 0.0], 'on_surface': True}]}))
+    (tmp_path / 'replay.yaml').write_text(yaml.safe_dump(
+        {'scenario': 'scenario.yaml', 'detections': 'twin.mcap', 'cone': 'twin.mcap',
+         'members': 8, 'sigma': 0.001, 'd_spread': 0.05, 'mu_C_spread': 0.01,
+         'every': 1.0 / 30.0}))
+    run_twin(load_twin(tmp_path / 'replay.yaml'), tmp_path / 'replay')
+    node_twin = twin._follower.twin
+    with (tmp_path / 'replay' / 'parameters.csv').open(newline='') as stream:
+        rows = list(csv.DictReader(stream))[-2:]
+    assert all(float(r['t']) == pytest.approx(node_twin.t, abs=1e-6) for r in rows)
+    for row in rows:
+        estimate, spread = node_twin.parameters()[row['key']]
+        assert float(row['estimate']) == pytest.approx(estimate, rel=1e-5)
+        assert float(row['spread']) == pytest.approx(spread, rel=1e-3)
+    ids, mean, _ = node_twin.pieces()
+    with (tmp_path / 'replay' / 'pieces.csv').open(newline='') as stream:
+        last = [r for r in csv.DictReader(stream) if float(r['t']) == float(rows[0]['t'])]
+    assert [int(r['piece']) for r in last] == ids.tolist()
+    np.testing.assert_allclose([[float(r['x']), float(r['y'])] for r in last], mean,
+                               atol=1e-6)
+
+
+def test_the_estimator_settings_are_node_parameters() -> None:
+    names = {spec.name for spec in twin_parameter_specs()}
+    assert set(TUNING) | {'members', 'sigma', 'seed'} <= names
+    assert set(TUNING) | {'members', 'sigma', 'seed', 'd', 'mu_C'} == {
+        f.name for f in fields(TwinSettings)}
 
 
 def test_bad_inputs_are_refused_and_the_twin_goes_on(context: Any, tmp_path: Path) -> None:
