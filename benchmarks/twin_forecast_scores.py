@@ -29,7 +29,7 @@ frame. The twin (16 members, the file's prior) follows it, and from 2 s on forec
   persistence (the last window's masses), climatology (each channel's mean rate over the
   run) and the empty forecast (none)::
 
-    .venv/bin/python benchmarks/twin_forecast_scores.py [--seconds 12] [--members 16]
+    .venv/bin/python benchmarks/twin_forecast_scores.py [--seconds 12] [--members 16] [--seed 1]
 """
 
 import argparse
@@ -123,6 +123,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--seconds', type=float, default=12.0)
     parser.add_argument('--members', type=int, default=16)
+    parser.add_argument('--seed', type=int, default=1, help="the twin's seed")
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     warm_up()
@@ -135,7 +136,7 @@ def main() -> None:
     exit_of = {i: (t, c) for i, t, c, _ in exits}
     closed = open_loop(params, profile, plant['first'], args.seconds)
     channels = model.channels.count
-    twin = Twin(params, TwinSettings(members=args.members, sigma=0.002, seed=1))
+    twin = Twin(params, TwinSettings(members=args.members, sigma=0.002, seed=args.seed))
     tracks: dict[int, list] = {}
     picks: dict[float, dict] = {}  # forecast time: plant id -> (twin, line) channels
     masses: dict[float, dict] = {}  # forecast time: method -> (W, C) kg
