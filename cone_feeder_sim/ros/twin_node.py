@@ -84,6 +84,8 @@ TWIN_PARAMETERS = (
     ParamSpec('forecast_period', 0.5, 's of stream time between forecasts (each costs M '
               'simulations over the longest horizon)',
               limit=Limit(0.0, 3600.0, 's', lo_open=True)),
+    ParamSpec('forecast_thread', True, 'forecasts on a thread of their own: a frame is '
+              'answered after its analysis, not after a forecast (false: in turn, as headless)'),
     ParamSpec('open_loop_after', 1.0, 's without a frame after which the twin goes on open '
               'loop', limit=Limit(0.0, 3600.0, 's', lo_open=True)),
     ParamSpec('max_delay', 0.2, 'how late (s) a frame may arrive: the twin goes back to itself '
@@ -153,7 +155,7 @@ class TwinNode(GuardedNode):
         self._follower = Follower(SimParams(model=model, solver=solver), LiveSettings(
             twin=settings, horizons=horizons, forecast_period=float(values['forecast_period']),
             open_loop_after=float(values['open_loop_after']),
-            max_delay=float(values['max_delay'])))
+            max_delay=float(values['max_delay']), background=bool(values['forecast_thread'])))
         self._frame_id = str(values['frame_id'])
         self._codec = CdrCodec()
         self._outputs = Outputs(self, self._codec, TWIN_TOPICS)
@@ -318,6 +320,10 @@ class TwinNode(GuardedNode):
         done = getattr(self, '_done', None)
         if done is not None:
             done.set()
+        follower = getattr(self, '_follower', None)
+        if follower is not None:
+            follower.stop.request()  # the forecast under way ends within a step
+            follower.close()
         try:
             recording = getattr(self, '_recording', None)
             if recording is not None:

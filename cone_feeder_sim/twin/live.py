@@ -28,10 +28,18 @@ from the model alone). Its state is one of
 - ``lost``: frames arrive but fewer than half of the last second's detections were
   associated with a piece or bore one (the twin's pieces are not where the camera sees
   them, and the camera's are near the rim, where none is born).
+
+With ``background`` the forecasts run on a thread of their own, from a snapshot of the twin
+(the kernels release the GIL): a frame is answered after its own analysis, not after a
+forecast over the longest horizon, and :attr:`Follower.outlook` is the newest forecast
+finished (a forecast due while one runs is skipped: never a queue). Without it (the
+default) the forecast is made in the call that finds it due: deterministic, for tests and
+the headless run.
 """
 
 from collections import deque
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 import math
 import time
@@ -39,6 +47,7 @@ import time
 from .estimator import Frame, Twin, TwinSettings
 from .forecast import Forecast, forecast
 from .frames import DetectionFrame
+from ..errors import Stopped
 from ..physics.simulation import SimParams
 from ..physics.stop import StopFlag
 
@@ -54,7 +63,8 @@ class LiveSettings:
     The estimator's settings, the forecasts' horizons (s) and period (s), open loop (s).
 
     max_delay: how late (s of stream time behind the twin) a frame may arrive and still be
-    analysed, by going back to the twin as it was before it and analysing again.
+    analysed, by going back to the twin as it was before it and analysing again;
+    background: the forecasts on a thread of their own (see the module).
     """
 
     twin: TwinSettings = TwinSettings()
@@ -62,6 +72,7 @@ class LiveSettings:
     forecast_period: float = 0.1
     open_loop_after: float = 1.0
     max_delay: float = 0.2
+    background: bool = False
 
 
 class Follower:
@@ -90,7 +101,10 @@ class Follower:
         self._recent: deque[tuple[float, int, int]] = deque()
         #: counters since the last :meth:`figures` call
         self._window = {'frames': 0, 'nis': 0.0, 'observed': 0, 'detections': 0,
-                        'associated': 0, 'busy': 0.0, 'stream': 0.0, 'forecasts': 0}
+                        'associated': 0, 'busy': 0.0, 'stream': 0.0, 'forecasts': 0,
+                        'forecast_busy': 0.0}
+        self._pool = ThreadPoolExecutor(1, 'twin-forecast') if settings.background else None
+        self._running: Future | None = None
 
     @property
     def t(self) -> float | None:
@@ -222,15 +236,38 @@ class Follower:
         window['busy'] += time.perf_counter() - start
         return done
 
-    def _forecast_if_due(self, t: float, twin: Twin) -> Forecast | None:
+    def _forecast_if_due(self, t: float, twin: Twin) -> None:
+        if self._running is not None and self._running.done():
+            self._finish(self._running)
         if t + 1e-9 < self._due:
-            return None
-        self.outlook = forecast(twin, self.settings.horizons)
-        self._window['forecasts'] += 1
+            return
         period = self.settings.forecast_period
         while self._due <= t + 1e-9:
             self._due += period
-        return self.outlook
+        if self._pool is None:
+            self.outlook = forecast(twin, self.settings.horizons)
+            self._window['forecasts'] += 1
+        elif self._running is None:  # else skipped: the thread is still on the last one
+            self._running = self._pool.submit(self._timed_forecast, twin.snapshot())
+
+    def _timed_forecast(self, twin: Twin) -> tuple[Forecast, float]:
+        start = time.perf_counter()
+        return forecast(twin, self.settings.horizons), time.perf_counter() - start
+
+    def _finish(self, running: Future) -> None:
+        """Take a finished background forecast (a stopped one is dropped)."""
+        self._running = None
+        try:
+            self.outlook, seconds = running.result()
+        except Stopped:
+            return
+        self._window['forecasts'] += 1
+        self._window['forecast_busy'] += seconds
+
+    def close(self) -> None:
+        """End the forecasts' thread (after the forecast under way, stopped or not)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
 
     def state(self, t: float | None = None) -> str:
         """Return the state at stream time t (default: the twin's time)."""
@@ -250,9 +287,13 @@ class Follower:
 
         frames, forecasts; nis and observed (its degrees of freedom); association (the share
         of detections associated); rtf: stream seconds taken per second of computing (at
-        least 1: the twin keeps up with a live stream); busy (s of computing).
+        least 1: the twin keeps up with a live stream; background forecasts counted as if
+        they took turns with the frames, which two cores need not); busy (s of computing).
         """
+        if self._running is not None and self._running.done():
+            self._finish(self._running)
         w = self._window
+        w['busy'] += w['forecast_busy']
         out = {'frames': w['frames'], 'forecasts': w['forecasts'], 'nis': w['nis'],
                'observed': w['observed'], 'busy': w['busy'],
                'association': (w['associated'] / w['detections'] if w['detections']

@@ -210,6 +210,30 @@ def test_swapped_or_absent_track_ids_give_the_same_twin() -> None:
     assert twins[0].parameters() == twins[1].parameters()
 
 
+def test_forecasts_on_their_own_thread_leave_the_twin_as_forecasts_in_turn() -> None:
+    # the forecasts read a snapshot: the twin is the one the frames make either way, and
+    # the newest finished forecast is one the synchronous follower also made
+    made = []
+    for background in (False, True):
+        follower = Follower(PARAMS, LiveSettings(twin=TwinSettings(members=4, seed=2),
+                                                 forecast_period=0.2, background=background))
+        outlooks = {}
+        for t, omega, xy in stream(1.0):
+            follower.cone_speed(t, omega)
+            follower.frame(DetectionFrame(t, xy, None, None))
+            if follower.outlook is not None:
+                outlooks[follower.outlook.t] = follower.outlook
+        follower.close()
+        figures = follower.figures()
+        made.append((follower.twin, outlooks, figures))
+    (ours, in_turn, _), (theirs, threaded, figures) = made
+    assert np.array_equal(ours.pieces()[1], theirs.pieces()[1])
+    assert ours.parameters() == theirs.parameters()
+    assert threaded and figures['forecasts'] >= 1
+    for t, outlook in threaded.items():
+        np.testing.assert_array_equal(outlook.mass, in_turn[t].mass)
+
+
 def test_a_frame_older_than_the_history_is_refused() -> None:
     follower = Follower(PARAMS, LiveSettings(twin=TwinSettings(members=4), max_delay=0.2))
     for t in (0.1, 0.2, 0.3, 0.4, 0.5):
