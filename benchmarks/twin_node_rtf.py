@@ -24,7 +24,7 @@ p95 and the largest latency from a frame's arrival to the publication of its est
 the association rate and the pieces followed::
 
     .venv/bin/python benchmarks/twin_node_rtf.py [--pieces 30 60] [--members 4 8 16]
-        [--forecast-period 0.1]
+        [--forecast-period 0.1] [--forecast-thread true false]
 """
 
 import argparse
@@ -60,7 +60,7 @@ def stop(proc: subprocess.Popen) -> None:
         proc.kill()
 
 
-def case(pieces: int, members: int, period: float, domain: int) -> None:
+def case(pieces: int, members: int, period: float, domain: int, thread: bool) -> None:
     """Run the plant and a twin of M members; print the figures of the last 15 s."""
     rng = np.random.default_rng(pieces)
     r = np.sqrt(rng.uniform(0.05 ** 2, 0.17 ** 2, pieces))
@@ -75,7 +75,8 @@ def case(pieces: int, members: int, period: float, domain: int) -> None:
                    '-p', 'initial_pieces.d:=[' + ', '.join(['225.0'] * pieces) + ']'], domain)
     twin = start([str(BIN / 'twin_node'), '--ros-args', '-r', 'detections:=particle_states',
                   '-p', "record_path:=''", '-p', f'members:={members}',
-                  '-p', f'forecast_period:={period}'], domain)
+                  '-p', f'forecast_period:={period}',
+                  '-p', f'forecast_thread:={str(thread).lower()}'], domain)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('twin_bench', context=context)
@@ -110,7 +111,8 @@ def case(pieces: int, members: int, period: float, domain: int) -> None:
     capacity = [float(row['real-time factor (capacity)']) for row in rows[1:]]
     association = [float(row['association rate']) for row in rows[1:]]
     states = sorted({row['state'] for row in rows})
-    print(f'N = {pieces}, M = {members}, forecasts every {period:g} s: '
+    print(f'N = {pieces}, M = {members}, forecasts every {period:g} s '
+          f'({"on their own thread" if thread else "in turn"}): '
           f'{frames / wall:.1f} frames/s taken (of 30), RTF {frames / wall / 30:.3f}, '
           f'capacity {np.median(capacity):.2f} (median), latency p95 {np.nanmedian(p95):.1f} ms '
           f'(median over windows; max {np.nanmax(worst):.0f} ms), association '
@@ -124,12 +126,15 @@ def main() -> None:
     parser.add_argument('--pieces', type=int, nargs='+', default=[30, 60])
     parser.add_argument('--members', type=int, nargs='+', default=[4, 8, 16])
     parser.add_argument('--forecast-period', type=float, default=0.1)
+    parser.add_argument('--forecast-thread', nargs='+', default=['true'],
+                        choices=['true', 'false'], help='twin_node forecast_thread values')
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     domain = 40 + os.getpid() % 50
     for pieces in args.pieces:
         for members in args.members:
-            case(pieces, members, args.forecast_period, domain)
+            for thread in args.forecast_thread:
+                case(pieces, members, args.forecast_period, domain, thread == 'true')
     print(calibration_line(), flush=True)
 
 
