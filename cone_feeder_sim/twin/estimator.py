@@ -48,7 +48,7 @@ import math
 
 import numpy as np
 
-from .association import associate, Association, GATE_CHI2
+from .association import associate, GATE_CHI2
 from .enkf import analyse
 from .particles import resample_parameters
 from ..errors import Stopped
@@ -65,9 +65,6 @@ __all__ = ['Exit', 'Frame', 'TUNING', 'Twin', 'TwinSettings']
 #: The ranges the members' parameters are held in: log d (d in N*s/m) and mu_C.
 LOG_D_RANGE = (math.log(1.0), math.log(1.0e4))
 MU_C_RANGE = (0.05, 5.0)
-#: A lost piece's covariance is multiplied by this in its second association (a gate three
-#: times as wide in distance).
-RECOVER = 9.0
 
 
 @dataclass(frozen=True)
@@ -326,10 +323,10 @@ class Twin:
         ids, mean, spread = self.pieces(tentative=True)
         sigma = self.settings.sigma
         noise = np.eye(2) * sigma ** 2
-        match, recovered = self._associate(ids, mean, spread + noise, detections[:, :2])
+        match = associate(mean, spread + noise, detections[:, :2])
         nis, observed = 0.0, 0
         if len(match.pairs):
-            nis, observed = self._analyse(ids, match.pairs, detections[:, :2], recovered)
+            nis, observed = self._analyse(ids, match.pairs, detections[:, :2])
             for piece, _ in match.pairs:
                 i = int(ids[piece])
                 self.last_seen[i] = t
@@ -356,32 +353,6 @@ class Twin:
             self._window_t0, self._window_states, self._window_frames = t, self.states, []
         return Frame(t=t, associated=len(match.pairs), births=len(born), deaths=len(dead),
                      exits=exits, nis=nis, observed=observed, left=seen_leaving)
-
-    def _associate(self, ids: np.ndarray, mean: np.ndarray, covariance: np.ndarray,
-                   xy: np.ndarray) -> tuple[Association, np.ndarray]:
-        """
-        Associate (:func:`.association.associate`), then recover lost pieces (returned).
-
-        A confirmed piece the gate missed is tried again against the detections left over,
-        its covariance times :data:`RECOVER` (a gate three times as wide in distance): a
-        piece that slid faster than its members (a product it does not know yet) is found
-        again instead of being born again at rest beside its stale copy (measured in
-        doc/twin.md).
-        """
-        match = associate(mean, covariance, xy)
-        lost = np.array([p for p in match.missed.tolist()
-                         if self.hits.get(int(ids[p]), 0) >= self.settings.confirm], dtype=int)
-        if not len(lost) or not len(match.unassigned):
-            return match, lost[:0]
-        again = associate(mean[lost], RECOVER * covariance[lost], xy[match.unassigned])
-        if not len(again.pairs):
-            return match, lost[:0]
-        found = np.column_stack([lost[again.pairs[:, 0]], match.unassigned[again.pairs[:, 1]]])
-        pairs = np.vstack([match.pairs, found])
-        return Association(pairs=pairs, distance=np.concatenate([match.distance,
-                                                                 again.distance]),
-                           missed=np.setdiff1d(match.missed, found[:, 0]),
-                           unassigned=np.setdiff1d(match.unassigned, found[:, 1])), found[:, 0]
 
     def _merge(self, t: float) -> list[int]:
         """
@@ -430,24 +401,15 @@ class Twin:
         q, _, _ = world_from_cone(state.y[self._rows(state, ids)], state.angle, omega)
         return q
 
-    def _analyse(self, ids: np.ndarray, pairs: np.ndarray, xy: np.ndarray,
-                 recovered: np.ndarray) -> tuple[float, int]:
-        """
-        Analyse the members against the pairs' detections; return NIS and its dof.
-
-        recovered: the pieces found again by the wide gate: their deviations from the mean
-        are widened by sqrt(RECOVER) too, the spread their recovery showed they had.
-        """
+    def _analyse(self, ids: np.ndarray, pairs: np.ndarray, xy: np.ndarray) -> tuple[float, int]:
+        """Analyse the members against the pairs' detections; return NIS and its dof."""
         n = len(ids)
         width = STATE_SIZE * n
         rows = [self._rows(s, ids) for s in self.states]
         ensemble = np.stack([np.concatenate([s.y[r].ravel(), [ld, mu]]) for s, r, ld, mu in
                              zip(self.states, rows, self.log_d, self.mu_c)])
         centre = ensemble[:, :width].mean(axis=0)  # the pieces' states; the parameters drift
-        factor = np.full(n, self.settings.inflation)
-        factor[recovered] *= math.sqrt(RECOVER)
-        ensemble[:, :width] = centre + np.repeat(factor, STATE_SIZE) * (ensemble[:, :width]
-                                                                        - centre)
+        ensemble[:, :width] = centre + self.settings.inflation * (ensemble[:, :width] - centre)
         angle = self.states[0].angle
         seen = rotate_z(np.column_stack([xy[pairs[:, 1]], np.zeros(len(pairs))]), -angle)
         columns = np.concatenate([STATE_SIZE * pairs[:, 0], STATE_SIZE * pairs[:, 0] + 1])

@@ -127,26 +127,6 @@ def test_a_false_detection_is_never_shown_and_dies_soon() -> None:
     assert shown == [0, 0, 1, 1, 1, 1, 1, 1]  # the piece confirmed at its third frame
 
 
-def test_a_confirmed_piece_outside_its_gate_is_found_again_not_born_again() -> None:
-    # a piece seen still for three frames, then 9 mm away (beyond the gate of about 4 mm,
-    # within the recovery gate three times as wide): the same piece, moved there
-    twin = Twin(PARAMS, TwinSettings(members=8, sigma=SIGMA, seed=2))
-    for k in range(1, 4):
-        twin.cone_speed(k / 30.0, 0.0)
-        twin.update(k / 30.0, np.array([[0.1, 0.0]]))
-    twin.cone_speed(4 / 30.0, 0.0)
-    frame = twin.update(4 / 30.0, np.array([[0.109, 0.0]]))
-    assert (frame.associated, frame.births) == (1, 0)
-    ids, mean, _ = twin.pieces()
-    assert ids.tolist() == [0] and mean[0, 0] > 0.104
-    # a tentative piece is not: the far detection is a birth
-    other = Twin(PARAMS, TwinSettings(members=8, sigma=SIGMA, seed=2))
-    other.cone_speed(1 / 30.0, 0.0)
-    other.update(1 / 30.0, np.array([[0.1, 0.0]]))
-    other.cone_speed(2 / 30.0, 0.0)
-    assert other.update(2 / 30.0, np.array([[0.109, 0.0]])).births == 1
-
-
 def test_bad_input_is_refused_with_its_reason() -> None:
     twin = Twin(PARAMS, TwinSettings(members=4))
     twin.update(0.1, np.array([[0.1, 0.0]]))
