@@ -105,6 +105,8 @@ TWIN_PARAMETERS = (
               limit=Limit(1, 1000, '')),
     ParamSpec('tentative_after', 0.1, 'a piece not yet confirmed and not seen for this long '
               '(s) is dropped', limit=Limit(0.0, 3600.0, 's')),
+    ParamSpec('localize_below', 16, 'the analysis is localized by piece when members is '
+              'below this (doc/twin.md)', limit=Limit(0, 1_000_000, '')),
 )
 #: How often (s) the watcher looks whether the context was shut down.
 STOP_POLL = 0.05

@@ -88,7 +88,15 @@ class TwinSettings:
     window with its own parameters), instead of frame by frame; 0: frame by frame, by the
     Kalman update with the pieces' states (overconfident: doc/twin.md); confirm: the
     frames in which a new piece must be seen before it counts (1: at once);
-    tentative_after: a piece not yet confirmed and not seen for this long (s) is dropped.
+    tentative_after: a piece not yet confirmed and not seen for this long (s) is dropped;
+    localize_below: the analysis is localized by piece (:mod:`.enkf`) when the ensemble has
+    fewer members than this. Measured on benchmarks/twin_forecast_scores.py (30 s, seed 1):
+    at 4 members localization is needed (the most likely channel 0.25 s before the exit
+    right for 69 of 89 pieces, 45 without; channel-mass error over 1 s 0.316 against 0.528
+    kg; at 8 members and 28 pieces NIS 1.7 times its degrees of freedom without), at 16 it
+    costs (0.5 s before the exit 42 of 79 against 52; seed 2: 37 against 47): the pieces'
+    errors are truly correlated through the product's d and mu_C that every member shares,
+    which 16 members estimate and localization cuts.
     """
 
     members: int = 32
@@ -105,13 +113,14 @@ class TwinSettings:
     window: float = 0.5
     confirm: int = 3
     tentative_after: float = 0.1
+    localize_below: int = 16
 
 
 #: The settings besides members, sigma, seed, d and mu_C (a twin file's keys and twin_node's
 #: parameters of the same names): their lower bounds; an int bound: an integer setting.
 TUNING = {'d_spread': 0.0, 'mu_C_spread': 0.0, 'drift': 0.0, 'inflation': 1.0,
           'death_after': 0.0, 'loosen': 1.0, 'window': 0.0, 'confirm': 1,
-          'tentative_after': 0.0}
+          'tentative_after': 0.0, 'localize_below': 0}
 
 
 @dataclass(frozen=True)
@@ -415,7 +424,8 @@ class Twin:
         columns = np.concatenate([STATE_SIZE * pairs[:, 0], STATE_SIZE * pairs[:, 0] + 1])
         values = np.concatenate([seen[:, 0], seen[:, 1]])
         sigma = np.full(len(columns), self.settings.sigma)
-        groups = np.concatenate([np.repeat(np.arange(n), STATE_SIZE), [-1, -1]])
+        groups = (np.concatenate([np.repeat(np.arange(n), STATE_SIZE), [-1, -1]])
+                  if len(self.states) < self.settings.localize_below else None)
         result = analyse(ensemble, columns, values, sigma, self.rng, groups)
         if self.settings.window <= 0.0:  # else the smoother analyses them, once a window
             self.log_d = np.clip(result.ensemble[:, width], *LOG_D_RANGE)
