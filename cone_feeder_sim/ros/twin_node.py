@@ -101,7 +101,7 @@ TWIN_PARAMETERS = (
               'before each analysis', limit=Limit(1.0, 10.0, '')),
     ParamSpec('window', 0.5, 'd and mu_C weighed once per window of this many s (0: frame '
               'by frame)', limit=Limit(0.0, 60.0, 's')),
-    ParamSpec('confirm', 3, 'the frames a new piece must be seen in before it counts',
+    ParamSpec('confirm', 2, 'the frames a new piece must be seen in before it counts',
               limit=Limit(1, 1000, '')),
     ParamSpec('tentative_after', 0.1, 'a piece not yet confirmed and not seen for this long '
               '(s) is dropped', limit=Limit(0.0, 3600.0, 's')),

@@ -111,7 +111,7 @@ class TwinSettings:
     seed: int = 0
     loosen: float = 10.0
     window: float = 0.5
-    confirm: int = 3
+    confirm: int = 2
     tentative_after: float = 0.1
     localize_below: int = 16
 

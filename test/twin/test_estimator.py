@@ -65,7 +65,7 @@ def test_pieces_are_born_once_and_then_followed(followed: tuple) -> None:
     assert frames[0][0].births == 5  # the first frame: every piece is new
     assert sum(frame.births for frame, _, _ in frames[1:]) == 0
     assert all(frame.associated == count for frame, count, _ in frames[1:])
-    # shown once seen in `confirm` frames (3): tentative before
+    # shown once seen in `confirm` frames (2): tentative before
     confirm = TwinSettings().confirm
     assert all(error == np.inf for _, _, error in frames[:confirm - 1])
     assert max(error for _, _, error in frames[confirm - 1:]) < 5.0 * SIGMA
@@ -124,7 +124,7 @@ def test_a_false_detection_is_never_shown_and_dies_soon() -> None:
         shown.append(len(twin.pieces()[0]))
         if k == 5:  # tentative_after (0.1 s) without a detection: dropped
             assert frame.deaths == 1 and len(twin.pieces(tentative=True)[0]) == 1
-    assert shown == [0, 0, 1, 1, 1, 1, 1, 1]  # the piece confirmed at its third frame
+    assert shown == [0, 1, 1, 1, 1, 1, 1, 1]  # the piece confirmed at its second frame
 
 
 def test_bad_input_is_refused_with_its_reason() -> None:
