@@ -13,6 +13,7 @@
 # limitations under the License.
 """The twin frame by frame: a frame waits for its cone speed; the camera stops and returns."""
 
+from collections.abc import Iterator
 from dataclasses import replace
 
 from cone_feeder_sim.errors import Stopped
@@ -85,18 +86,24 @@ def test_a_frame_without_encoder_goes_on_when_the_next_one_comes() -> None:
     assert follower.state() == 'following'
 
 
+def plant_frames(params: SimParams, profile: RotationProfile, places: list,
+                 seconds: float) -> Iterator[tuple[float, float, SimState, np.ndarray]]:
+    """Yield a plant's (t, cone speed, state, true world x, y (n, 2)) at 30 frames/s."""
+    model = params.model
+    q = np.array([[x, y, resting_height(model, model.product, x, y)] for x, y in places])
+    plant, _ = add_particles(SimState(), params, q)
+    for k in range(1, int(round(30 * seconds)) + 1):
+        t = k / 30.0
+        plant = advance(plant, params, profile, t).state
+        seen, _, _ = world_from_cone(plant.y, plant.angle, profile.omega(t))
+        yield t, profile.omega(t), plant, seen[:, :2]
+
+
 def stream(seconds: float) -> list[tuple[float, float, np.ndarray]]:
     """Return the plant's (t, cone speed, detections) at 30 frames/s."""
     rng = np.random.default_rng(5)
-    q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in PLACES])
-    plant, _ = add_particles(SimState(), PARAMS, q)
-    out = []
-    for k in range(1, int(round(30 * seconds)) + 1):
-        t = k / 30.0
-        plant = advance(plant, PARAMS, PROFILE, t).state
-        seen, _, _ = world_from_cone(plant.y, plant.angle, PROFILE.omega(t))
-        out.append((t, PROFILE.omega(t), seen[:, :2] + rng.normal(0.0, 0.001, (plant.count, 2))))
-    return out
+    return [(t, omega, seen + rng.normal(0.0, 0.001, seen.shape))
+            for t, omega, _, seen in plant_frames(PARAMS, PROFILE, PLACES, seconds)]
 
 
 def test_late_frames_give_what_the_frames_in_order_give() -> None:
@@ -147,23 +154,17 @@ def camera(seconds: float, seed: int) -> list[tuple[float, float, DetectionFrame
     touch = 2.0 * 0.98 * model.product.s0  # 2 % of a diameter overlapping
     places = [[0.10, 0.02], [0.10, 0.02 + touch], [-0.08, 0.09], [0.03, -0.13],
               [0.03 + touch, -0.13], [-0.12, -0.05]]
-    q = np.array([[x, y, resting_height(model, model.product, x, y)] for x, y in places])
-    plant, _ = add_particles(SimState(), params, q)
     out = []
-    for k in range(1, int(round(30 * seconds)) + 1):
-        t = k / 30.0
-        plant = advance(plant, params, profile, t).state
-        seen, _, _ = world_from_cone(plant.y, plant.angle, profile.omega(t))
+    for t, omega, plant, seen in plant_frames(params, profile, places, seconds):
         kept = rng.random(plant.count) > 0.1
-        xy = seen[kept, :2] + rng.normal(0.0, 0.0015, (int(kept.sum()), 2))
+        xy = seen[kept] + rng.normal(0.0, 0.0015, (int(kept.sum()), 2))
         ids = plant.ids[kept].astype(np.uint32)
         if rng.random() < 0.3:
             r, a = 0.25 * np.sqrt(rng.random()), 2.0 * np.pi * rng.random()
             xy = np.vstack([xy, [r * np.cos(a), r * np.sin(a)]])
             ids = np.append(ids, np.uint32(999))
         order = rng.permutation(len(xy))
-        out.append((t, profile.omega(t), DetectionFrame(t, xy[order], None, ids[order]),
-                    seen[:, :2]))
+        out.append((t, omega, DetectionFrame(t, xy[order], None, ids[order]), seen))
     return out
 
 
