@@ -29,8 +29,9 @@ detections the estimator
    the covariances the ensemble carries, so that the parameters are re-identified on line;
 3. adds a piece for each detection left over (a birth: resting on the cone where it was
    seen, spread by the detection noise over the members) and drops pieces not seen for
-   ``death_after`` s, and the younger of two pieces within the gate of each other (deaths),
-   and pieces that left the cone in most members (exits).
+   ``death_after`` s, and one of two pieces within the gate of each other that were not
+   both seen (deaths: :meth:`Twin._merge`), and pieces that left the cone in most members
+   (exits).
 
 A piece born from one detection is tentative (a false detection is one too) until it was
 seen in ``confirm`` frames; a tentative piece not seen for ``tentative_after`` s dies. Only
