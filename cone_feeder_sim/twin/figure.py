@@ -63,20 +63,32 @@ class Scores:
     forecasts: np.ndarray
 
 
-def _rows(path: Path) -> list[dict[str, str]]:
-    with path.open(newline='', encoding='utf-8') as stream:
-        return list(csv.DictReader(stream))
+Tables = dict[str, list[dict[str, str]]]
+
+
+def _tables(out: Path) -> Tables:
+    """Read the run directory's CSVs once: file name -> its rows."""
+    tables = {}
+    for name in ('exits.csv', 'frames.csv', 'pieces.csv', 'channel_forecast.csv',
+                 'parameters.csv'):
+        with (out / name).open(newline='', encoding='utf-8') as stream:
+            tables[name] = list(csv.DictReader(stream))
+    return tables
 
 
 def read_scores(out: Path) -> Scores:
     """Score the forecasts in the run directory out against its exits (see the module)."""
+    return _scores(_tables(out))
+
+
+def _scores(tables: Tables) -> Scores:
     exits = {int(r['piece']): (float(r['t']), int(r['channel']), float(r['mass']))
-             for r in _rows(out / 'exits.csv')}
-    frames = [float(r['t']) for r in _rows(out / 'frames.csv')]
+             for r in tables['exits.csv']}
+    frames = [float(r['t']) for r in tables['frames.csv']]
     end = max(frames, default=0.0)
     right = np.zeros(len(LEAD_BINS) - 1, dtype=int)
     cases = np.zeros_like(right)
-    for r in _rows(out / 'pieces.csv'):
+    for r in tables['pieces.csv']:
         left = exits.get(int(r['piece']))
         if left is None:
             continue
@@ -85,7 +97,7 @@ def read_scores(out: Path) -> Scores:
         if 0 <= k < len(cases):
             cases[k] += 1
             right[k] += int(r['channel']) == left[1]
-    forecast = _rows(out / 'channel_forecast.csv')
+    forecast = tables['channel_forecast.csv']
     horizons = np.array(sorted({float(r['horizon']) for r in forecast}))
     times = np.array([t for t, _, _ in exits.values()])
     channels = np.array([c for _, c, _ in exits.values()], dtype=int)
@@ -110,9 +122,9 @@ def read_scores(out: Path) -> Scores:
                   forecasts=count)
 
 
-def _consistency(out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Return per whole second of stream: its start, NIS / dof and the bounds of that ratio."""
-    rows = _rows(out / 'frames.csv')
+def _consistency(rows: list[dict[str, str]]) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                      np.ndarray]:
+    """Return per whole second of frames.csv's rows: its start, NIS / dof, the ratio's bounds."""
     t = np.array([float(r['t']) for r in rows])
     nis = np.array([float(r['nis']) for r in rows])
     dof = np.array([int(r['observed']) for r in rows])
@@ -132,7 +144,8 @@ def _consistency(out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
 
 def build_figure(out: Path, title: str = 'digital twin', dpi: float = 100.0) -> Figure:
     """Return the one-page report of the run directory out (see the module)."""
-    scores = read_scores(out)
+    tables = _tables(out)
+    scores = _scores(tables)
     figure = Figure(figsize=(15.0, 8.5), dpi=dpi)
     FigureCanvasAgg(figure)
     axes = figure.subplots(2, 3)
@@ -153,7 +166,7 @@ def build_figure(out: Path, title: str = 'digital twin', dpi: float = 100.0) -> 
     ax.set(title='channel masses: error summed over channels', xlabel='horizon (forecasts)',
            ylabel='mean absolute error (kg)')
     ax.legend()
-    parameters = _rows(out / 'parameters.csv')
+    parameters = tables['parameters.csv']
     for ax, key, unit in ((axes[0, 2], 'd', 'N s/m'), (axes[1, 0], 'mu_C', '-')):
         rows = [r for r in parameters if r['key'] == key]
         t = np.array([float(r['t']) for r in rows])
@@ -163,20 +176,20 @@ def build_figure(out: Path, title: str = 'digital twin', dpi: float = 100.0) -> 
         ax.fill_between(t, value - spread, value + spread, color='tab:green', alpha=0.25)
         ax.set(title=f'{key}: estimate ± spread', xlabel='t (s)', ylabel=f'{key} ({unit})')
     ax = axes[1, 1]
-    starts, ratio, low, high = _consistency(out)
+    starts, ratio, low, high = _consistency(tables['frames.csv'])
     ax.step(starts, ratio, where='post', label='NIS / dof')
     ax.fill_between(starts, low, high, step='post', color='tab:gray', alpha=0.3,
                     label='χ² bounds, α = 1e-3')
     ax.set(title='consistency per second', xlabel='t (s)', ylabel='NIS / degrees of freedom')
     ax.legend()
     ax = axes[1, 2]
-    rows = _rows(out / 'frames.csv')
+    rows = tables['frames.csv']
     t = np.array([float(r['t']) for r in rows])
     ax.plot(t, [int(r['detections']) for r in rows], lw=0.8, label='detections')
     ax.plot(t, [int(r['associated']) for r in rows], lw=0.8, label='associated')
     ax.set(title='frames', xlabel='t (s)', ylabel='count')
     ax.legend()
-    figure.suptitle(f'{title}: forecasts scored against the {len(_rows(out / "exits.csv"))} '
+    figure.suptitle(f'{title}: forecasts scored against the {len(tables["exits.csv"])} '
                     'exits the twin saw')
     figure.tight_layout()
     return figure
