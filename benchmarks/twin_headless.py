@@ -20,6 +20,10 @@ the cone speed at each frame. The twin file's defaults (forecasts every 0.1 s at
 and 2 s) with M members; prints the wall time of the run against the stream's 60 s::
 
     .venv/bin/python benchmarks/twin_headless.py [--seconds 60] [--members 32 8]
+        [--riders true false]
+
+--riders false integrates every piece of a forecast to the horizon (forecast.forecast's
+riders), to compare with the default side by side.
 """
 
 import argparse
@@ -77,23 +81,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--seconds', type=float, default=60.0)
     parser.add_argument('--members', type=int, nargs='+', default=[32, 8])
+    parser.add_argument('--riders', choices=['true', 'false'], nargs='+', default=['true'])
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     warm_up()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         write_stream(folder, args.seconds)
-        for members in args.members:
+        for members, riders in ((m, r) for m in args.members for r in args.riders):
             (folder / 'twin.yaml').write_text(yaml.safe_dump(
                 {'scenario': 'scenario.yaml', 'detections': 'detections.csv',
                  'cone': 'cone.csv', 'members': members}))
             spec = load_twin(folder / 'twin.yaml')
             start = time.perf_counter()
-            summary = run_twin(spec, folder / f'out{members}')
+            summary = run_twin(spec, folder / f'out{members}{riders}', riders=riders == 'true')
             wall = time.perf_counter() - start
-            print(f'M = {members}: {wall:.1f} s wall for a {args.seconds:g}-s stream of 30 '
-                  f'pieces ({summary.frames} frames, {summary.forecasts} forecasts, NIS '
-                  f'{summary.nis:.0f} for {summary.observed})', flush=True)
+            print(f'M = {members}, riders {riders}: {wall:.1f} s wall for a {args.seconds:g}-s '
+                  f'stream of 30 pieces ({summary.frames} frames, {summary.forecasts} '
+                  f'forecasts, NIS {summary.nis:.0f} for {summary.observed})', flush=True)
     print(calibration_line(), flush=True)
 
 

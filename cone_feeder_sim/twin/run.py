@@ -73,9 +73,13 @@ class TwinSummary:
     observed: int
 
 
-def run_twin(spec: TwinSpec, out: Path,
-             log: Callable[[str], None] = lambda line: None) -> TwinSummary:
-    """Run the twin over the spec's streams; write the CSVs into out; return a summary."""
+def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line: None,
+             riders: bool = True) -> TwinSummary:
+    """
+    Run the twin over the spec's streams; write the CSVs into out; return a summary.
+
+    riders: as :func:`~.forecast.forecast`'s (False: every piece integrated to the horizon).
+    """
     out.mkdir(parents=True, exist_ok=True)
     scenario = spec.scenario
     product = scenario.model.product
@@ -127,7 +131,7 @@ def run_twin(spec: TwinSpec, out: Path,
                 writers['exits.csv'].writerow([f'{left.t:.6f}', left.piece, left.channel,
                                                f'{left.mass:.6g}'])
             if t + 1e-9 >= due:
-                _write_forecast(twin, spec, writers)
+                _write_forecast(twin, spec, writers, riders)
                 forecasts += 1
                 while due <= t + 1e-9:
                     due += spec.every
@@ -136,9 +140,9 @@ def run_twin(spec: TwinSpec, out: Path,
                        observed=observed)
 
 
-def _write_forecast(twin: Twin, spec: TwinSpec, writers: dict) -> None:
+def _write_forecast(twin: Twin, spec: TwinSpec, writers: dict, riders: bool) -> None:
     """Forecast now; add its rows to the channel, piece and parameter files."""
-    result = forecast(twin, spec.horizons)
+    result = forecast(twin, spec.horizons, riders=riders)
     t = f'{result.t:.6f}'
     for h, masses, spreads in zip(result.horizons, result.mass, result.mass_spread):
         for channel, (mass, spread) in enumerate(zip(masses, spreads), start=1):
