@@ -85,8 +85,9 @@ class TwinSettings:
     members: a twin corrected by detections with millimetres of noise needs no micrometre
     accuracy (at 10, the default 1e-6 m in position becomes 1e-5 m; measured in doc/twin.md);
     window: d and mu_C are weighed once per window of this many seconds, against every
-    detection of the window at once (a particle step: each member run again over the
-    window with its own parameters), instead of frame by frame; 0: frame by frame, by the
+    detection of the window at once (a particle step: a second ensemble, one member per
+    member with its parameters at the window's start, runs over the window alongside the
+    twin's, without analyses), instead of frame by frame; 0: frame by frame, by the
     Kalman update with the pieces' states (overconfident: doc/twin.md); confirm: the
     frames in which a new piece must be seen before it counts (1: at once);
     tentative_after: a piece not yet confirmed and not seen for this long (s) is dropped;
@@ -198,10 +199,13 @@ class Twin:
         self._exits: list[int] = []
         self._left: list[Exit] = []
         self._drifted = t0
+        #: the window: its start (s); the smoother's members (None: nothing to weigh), run
+        #: alongside the twin's; their predictions of the window's detections so far, (M, k)
+        #: per frame, and those detections (k,) (m, x and y of each piece)
         self._window_t0 = t0
-        self._window_states = list(self.states)
-        #: the window's associated detections: (t, piece ids (k,), world x, y (k, 2))
-        self._window_frames: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self._smoother: list[SimState] | None = None
+        self._predicted: list[np.ndarray] = []
+        self._observed: list[np.ndarray] = []
 
     def snapshot(self) -> 'Twin':
         """Return a copy that goes on apart from this twin (its random numbers included)."""
@@ -213,8 +217,8 @@ class Twin:
         other.masses, other.last_seen = dict(self.masses), dict(self.last_seen)
         other.hits = dict(self.hits)
         other._exits, other._left = list(self._exits), list(self._left)
-        other._window_states = list(self._window_states)
-        other._window_frames = list(self._window_frames)
+        other._smoother = None if self._smoother is None else list(self._smoother)
+        other._predicted, other._observed = list(self._predicted), list(self._observed)
         return other
 
     @property
@@ -267,7 +271,11 @@ class Twin:
         members' mean exit time, the channel most of them give, the piece's mass.
         """
         m = len(self.states)
-        results = self.advance(self.states, t1)
+        smoother = self._smoother or []
+        results = self.advance(self.states + smoother, t1)  # one compiled call for both
+        if smoother:
+            self._smoother = [r.state for r in results[m:]]
+            results = results[:m]
         self.states = [r.state for r in results]
         gone: dict[int, int] = {}
         seen: dict[int, list[tuple[float, int]]] = {}
@@ -341,8 +349,7 @@ class Twin:
                 i = int(ids[piece])
                 self.last_seen[i] = t
                 self.hits[i] = min(self.hits.get(i, 0) + 1, self.settings.confirm)
-            self._window_frames.append((t, ids[match.pairs[:, 0]],
-                                        detections[match.pairs[:, 1], :2]))
+            self._window_frame(t, ids[match.pairs[:, 0]], detections[match.pairs[:, 1], :2])
         # a detection left over is a birth, unless it is within 3 sigma of the rim (a piece
         # leaving, or a false detection there: no member could hold it on the cone)
         rim = self.params.model.r - 3.0 * sigma
@@ -360,7 +367,7 @@ class Twin:
         dead += self._merge(t)
         if self.settings.window > 0.0 and t - self._window_t0 >= self.settings.window - 1e-9:
             self._smooth()
-            self._window_t0, self._window_states, self._window_frames = t, self.states, []
+            self._start_window(t)
         return Frame(t=t, associated=len(match.pairs), births=len(born), deaths=len(dead),
                      exits=exits, nis=nis, observed=observed, left=seen_leaving)
 
@@ -443,18 +450,16 @@ class Twin:
         """
         Weigh d and mu_C against the window's detections at once (:mod:`.particles`).
 
-        Each member runs again over the window with its current d and mu_C, without
-        analyses (:meth:`_window_predictions`); the likelihood of the detections given its
-        predictions weighs it, and the members' parameters are resampled and jittered.
+        The smoother's members ran over the window alongside the twin's, without analyses,
+        each with its parameters at the window's start (:meth:`_start_window`); the
+        likelihood of the window's detections given its predictions weighs it, and the
+        members' parameters (their random walk since included) are resampled and jittered.
         Measured against the frame-by-frame Kalman update of the parameters (window 0) and
         a linear ensemble smoother over the window (tried, not kept): doc/twin.md.
         """
-        if not self._window_frames or not all(s.count for s in self._window_states):
+        if not self._predicted:
             return
-        predicted = self._window_predictions()
-        if predicted is None:
-            return
-        g, y = predicted
+        g, y = np.concatenate(self._predicted, axis=1), np.concatenate(self._observed)
         log_likelihood = -0.5 * np.sum((g - y) ** 2, axis=1) / self.settings.sigma ** 2
         parameters, _ = resample_parameters(np.column_stack([self.log_d, self.mu_c]),
                                             log_likelihood, self.rng)
@@ -462,38 +467,41 @@ class Twin:
         self.mu_c = np.clip(parameters[:, 1], *MU_C_RANGE)
         self.states = [self._with_products(s, k) for k, s in enumerate(self.states)]
 
-    def _window_predictions(self) -> tuple[np.ndarray, np.ndarray] | None:
+    def _start_window(self, t: float) -> None:
         """
-        Return the members' predictions of the window's detections (M, p) and those (p,).
+        Start a window at t (s): the smoother's members, from the members' mean state.
 
-        Every member runs from the members' mean state at the window's start, each with its
-        own parameters, so that their predictions differ by their parameters alone: run
-        from their own states, the state's noise made the likelihoods differ by tens to
-        thousands for parameters that change no position (pieces that stick), the weights
-        a lottery, and the parameters drift (mu_C to 0.98 +- 0.04 for a truth of 0.7,
-        benchmarks/twin_identify.py at 6 rad/s). Only the pieces every member still holds
-        at a frame count. None: nothing to compare.
+        Each smoother member is the members' mean state with one member's own parameters,
+        so that their predictions differ by their parameters alone: run from their own
+        states, the state's noise made the likelihoods differ by tens to thousands for
+        parameters that change no position (pieces that stick), the weights a lottery, and
+        the parameters drift (mu_C to 0.98 +- 0.04 for a truth of 0.7,
+        benchmarks/twin_identify.py at 6 rad/s). They run frame by frame with the twin's
+        members (:meth:`predict`), so that no frame carries the whole window's run. Only the
+        pieces every member holds now, and still holds at a frame, count.
         """
-        first = self._window_states[0]
-        held = first.ids[np.all([np.isin(first.ids, s.ids) for s in self._window_states],
-                                axis=0)]
+        self._window_t0, self._predicted, self._observed = t, [], []
+        self._smoother = None
+        if not all(s.count for s in self.states):
+            return
+        first = self.states[0]
+        held = first.ids[np.all([np.isin(first.ids, s.ids) for s in self.states], axis=0)]
         base = remove_particles(first, sorted(set(first.ids.tolist()) - set(held.tolist())))
-        base = replace(base, y=np.mean([s.y[self._rows(s, base.ids)]
-                                        for s in self._window_states], axis=0))
-        states = [self._with_products(base, k) for k in range(len(self._window_states))]
-        predicted, observed = [], []
-        for t, ids, xy in self._window_frames:
-            states = [r.state for r in self.advance(states, t)]
-            held = ids[np.all([np.isin(ids, s.ids) for s in states], axis=0)]
-            if not len(held):
-                continue
-            omega = self._profile.omega(t)
-            predicted.append(np.stack([self._world(s, held, omega)[:, :2].ravel()
-                                       for s in states]))
-            observed.append(xy[np.isin(ids, held)].ravel())
-        if not observed:
-            return None
-        return np.concatenate(predicted, axis=1), np.concatenate(observed)
+        base = replace(base, y=np.mean([s.y[self._rows(s, base.ids)] for s in self.states],
+                                       axis=0))
+        self._smoother = [self._with_products(base, k) for k in range(len(self.states))]
+
+    def _window_frame(self, t: float, ids: np.ndarray, xy: np.ndarray) -> None:
+        """Add the smoother's predictions of a frame's associated detections (ids, xy)."""
+        if self._smoother is None:
+            return
+        held = ids[np.all([np.isin(ids, s.ids) for s in self._smoother], axis=0)]
+        if not len(held):
+            return
+        omega = self._profile.omega(t)
+        self._predicted.append(np.stack([self._world(s, held, omega)[:, :2].ravel()
+                                         for s in self._smoother]))
+        self._observed.append(xy[np.isin(ids, held)].ravel())
 
     def _product(self, member: int, mass: float) -> ProductParams:
         return replace(self.params.model.product, m=mass, d=float(np.exp(self.log_d[member])),
