@@ -23,7 +23,6 @@ against the others::
 """
 
 import argparse
-import csv
 from pathlib import Path
 import tempfile
 import time
@@ -32,8 +31,10 @@ from calibration import calibration_line
 from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.simulation import SimParams, warm_up
 from cone_feeder_sim.twin.estimator import Twin, TwinSettings
+from cone_feeder_sim.twin.spec import load_twin
 import numpy as np
 from twin_headless import write_stream
+import yaml
 
 
 def main() -> None:
@@ -48,21 +49,20 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         write_stream(folder, args.seconds)
-        with (folder / 'cone.csv').open() as stream:
-            cone = {round(float(r['t']), 6): float(r['omega']) for r in csv.DictReader(stream)}
-        frames: dict[float, list[tuple[float, float]]] = {}
-        with (folder / 'detections.csv').open() as stream:
-            for r in csv.DictReader(stream):
-                frames.setdefault(round(float(r['t']), 6), []).append(
-                    (float(r['x']), float(r['y'])))
+        (folder / 'twin.yaml').write_text(yaml.safe_dump(
+            {'scenario': 'scenario.yaml', 'detections': 'detections.csv', 'cone': 'cone.csv'}))
+        spec = load_twin(folder / 'twin.yaml')
+    times, first = np.unique(spec.detections[:, 0], return_index=True)
+    frames = np.split(spec.detections[:, 1:3], first[1:])
+    cone = dict(zip(spec.cone[:, 0].tolist(), spec.cone[:, 1].tolist()))
     twin = Twin(SimParams(model=ModelParams()), TwinSettings(
         members=args.members, sigma=0.002, window=args.window))
     spent, closes = [], []
-    for t in sorted(frames):
+    for t, xy in zip(times.tolist(), frames):
         twin.cone_speed(t, cone[t])
         opened = twin._window_t0
         start = time.perf_counter()
-        twin.update(t, np.array(frames[t]))
+        twin.update(t, xy)
         spent.append(1e3 * (time.perf_counter() - start))
         closes.append(twin._window_t0 != opened)
     skip = int(round(2.0 * 30))

@@ -252,7 +252,9 @@ class Twin:
         else:
             self.times.append(float(t))
             self.omegas.append(float(omega))
-        keep = min(self.t, self._window_t0)  # the smoother runs the window again
+        # from the window's start, as when the window ran again at its end (the angle is
+        # summed from the table's first time, so where it starts sets the last bits)
+        keep = min(self.t, self._window_t0)
         first = max(int(np.searchsorted(self.times, keep, side='right')) - 1, 0)
         del self.times[:first], self.omegas[:first]
         self._profile = RotationProfile(np.array(self.times), np.array(self.omegas))

@@ -29,6 +29,7 @@ from cone_feeder_sim.twin.estimator import Exit, Twin, TwinSettings
 from cone_feeder_sim.twin.forecast import forecast
 import numpy as np
 import pytest
+from test_twin_live import plant_frames
 
 MODEL = ModelParams()
 PARAMS = SimParams(model=MODEL)
@@ -120,17 +121,12 @@ def test_pieces_riding_with_the_cone_leave_the_forecast_as_they_were() -> None:
     profile = RotationProfile.from_table([[0.0, 0.0], [0.5, 7.0]])
     rng = np.random.default_rng(5)
     radius, angle = rng.uniform(0.06, 0.2, 12), rng.uniform(0.0, 2.0 * np.pi, 12)
-    xy = np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
-    q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in xy])
-    plant, _ = add_particles(SimState(), PARAMS, q)
+    places = list(zip(radius * np.cos(angle), radius * np.sin(angle)))
     twin = Twin(PARAMS, TwinSettings(members=8, sigma=0.001, seed=2))
     noise = np.random.default_rng(0)
-    for k in range(1, 19):
-        t = k / 30.0
-        plant = advance(plant, PARAMS, profile, t).state
-        twin.cone_speed(t, profile.omega(t))
-        seen, _, _ = world_from_cone(plant.y, plant.angle, profile.omega(t))
-        twin.update(t, seen[:, :2] + noise.normal(0.0, 0.001, (plant.count, 2)))
+    for t, omega, _, seen in plant_frames(PARAMS, profile, places, 0.6):
+        twin.cone_speed(t, omega)
+        twin.update(t, seen + noise.normal(0.0, 0.001, seen.shape))
     short, full = forecast(twin), forecast(twin, riders=False)
     assert 0 < short.riding < 8 * len(short.ids) and full.riding == 0
     np.testing.assert_array_equal(short.ids, full.ids)
