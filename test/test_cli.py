@@ -206,11 +206,12 @@ def test_signal_ends_the_run_after_the_interval(
         before = signal.getsignal(signum)
         code = main(['run', str(scenario), '--events', str(events), '--mcap', str(run_mcap),
                      '--quiet'])
+        after = signal.getsignal(signum)
     finally:
         if ignored:
             signal.signal(signum, signal.SIG_IGN)
     assert code == 128 + signum
-    assert signal.getsignal(signum) == before  # restored
+    assert after == before  # restored
     err = capsys.readouterr().err
     assert f'interrupted by {signum.name} at t = ' in err
     with events.open() as stream:
