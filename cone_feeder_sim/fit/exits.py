@@ -146,7 +146,7 @@ def simulate_exits(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
                 math.atan2(failure.position[1], failure.position[0]))
             t[failure.particle_id] = failure.t
     if last and last[0].state.count:
-        position = last[0].world()[0]
+        position = last[0].positions()
         angle[last[0].state.ids] = np.degrees(np.arctan2(position[:, 1], position[:, 0]))
     return np.mod(angle, 360.0), t
 

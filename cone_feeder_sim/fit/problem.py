@@ -76,11 +76,11 @@ def trace(sim: Simulator, start: np.ndarray, particle: np.ndarray, t: np.ndarray
                     where[failure.particle_id] = failure.position
         if k < len(times):
             if sim.state.count:
-                where[sim.state.ids] = sim.world()[0]
+                where[sim.state.ids] = sim.positions()
             rows = slice(bounds[k], bounds[k + 1])
             out[rows] = where[particle[rows]]
     if sim.state.count:
-        where[sim.state.ids] = sim.world()[0]
+        where[sim.state.ids] = sim.positions()
     return out, where
 
 

@@ -177,7 +177,7 @@ class WindowRun:
             where = np.zeros((len(scenario.particles), 3))
             if len(ids):
                 sim.state = self._state(scenario, params, sim.state, ids, start)
-                where[ids] = sim.world()[0]
+                where[ids] = sim.positions()
         rows = windows.rows[k]
         predicted, where = trace(sim, where, tracks.particle[rows], tracks.t[rows], last=t1)
         residual = (predicted - tracks.xyz[rows])[:, :self.columns].reshape(-1)

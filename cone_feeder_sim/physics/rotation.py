@@ -91,6 +91,8 @@ class RotationProfile:
 
     def omega(self, t: float) -> float:
         """Return the angular velocity at time t (rad/s)."""
+        if t >= self.times[-1]:  # past the last breakpoint (a constant profile: always)
+            return float(self.omegas[-1])
         return float(np.interp(t, self.times, self.omegas))
 
     def _angle_from_start(self, t: float) -> float:
@@ -121,6 +123,10 @@ class RotationProfile:
         """
         if not t1 > t0:
             raise ParameterError(f'interval end {t1!r} must be after its start {t0!r}')
+        if t0 >= self.times[-1]:  # no breakpoint inside: one segment (most intervals)
+            omega0, omega1 = self.omega(t0), self.omega(t1)
+            return (np.array([t0, t1], dtype=float), np.array([omega0]),
+                    np.array([(omega1 - omega0) / (t1 - t0)]))
         inner = self.times[(self.times > t0) & (self.times < t1)]
         seg_t = np.concatenate([[t0], inner, [t1]])
         seg_omega = np.array([self.omega(t) for t in seg_t[:-1]])

@@ -488,11 +488,14 @@ def _result(state: SimState, params: SimParams, profile: RotationProfile, t1: fl
                           stopped=True)
     y, status, t_event, stats, counters = (work.y, work.status, work.t_event, work.stats,
                                            work.counters)
-    exits = _exit_events(state, params, profile, y, status, t_event)
-    failures = tuple(_failure(state, profile, y, i, float(t_event[i]),
-                              FAILURE_REASONS.get(int(stats[i, STAT_REASON]), 'unknown'))
-                     for i in np.flatnonzero(status == FAILED))
     keep = status == ACTIVE
+    if keep.all():  # most intervals: every piece carries on (nothing to locate, no copies)
+        exits, failures, keep = ExitEvents.none(), (), slice(None)
+    else:
+        exits = _exit_events(state, params, profile, y, status, t_event)
+        failures = tuple(_failure(state, profile, y, i, float(t_event[i]),
+                                  FAILURE_REASONS.get(int(stats[i, STAT_REASON]), 'unknown'))
+                         for i in np.flatnonzero(status == FAILED))
     new_state = replace(state, t=float(t1), angle=state.angle + profile.integral(state.t, t1),
                         y=y[keep], products=state.products[keep], ids=state.ids[keep],
                         step_size=work.step_size[keep], coupling_step=work.coupling_step,
@@ -746,10 +749,8 @@ def _failure(state: SimState, profile: RotationProfile, y: np.ndarray, i: int, t
 def _exit_events(state: SimState, params: SimParams, profile: RotationProfile, y: np.ndarray,
                  status: np.ndarray, t_event: np.ndarray) -> ExitEvents:
     idx = np.flatnonzero(status == EXITED)
-    if not idx.size:  # most intervals: nothing to locate (the same empty arrays, sooner)
-        return ExitEvents(ids=state.ids[idx], t=t_event[idx], angle_deg=np.zeros(0),
-                          channel=np.zeros(0, dtype=np.int64), position=np.zeros((0, 3)),
-                          velocity=np.zeros((0, 3)), mass=np.zeros(0))
+    if not idx.size:
+        return ExitEvents.none()
     positions = np.zeros((idx.size, 3))
     velocities = np.zeros((idx.size, 3))
     for j, i in enumerate(idx):
@@ -807,6 +808,10 @@ class Simulator:
     def world(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return world position (N, 3), velocity (N, 3) and filter force (N, 3) now."""
         return world_from_cone(self.state.y, self.state.angle, self.omega())
+
+    def positions(self) -> np.ndarray:
+        """Return where the pieces are now (N, 3) (m, world frame): the first of :meth:`world`."""
+        return rotate_z(self.state.y[:, 0:3], self.state.angle)
 
 
 def cone_surface_height(model: ModelParams, x: float, y: float) -> float:
