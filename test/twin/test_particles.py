@@ -85,3 +85,34 @@ def test_d_and_mu_c_are_identified_where_the_pieces_slide() -> None:
     assert all(abs(v) < 3.0 for v in z.values()), (found, z)
     # it learned: spreads below the prior's (the random walk of 5 % per s keeps them up)
     assert found['mu_C'][1] < 0.15 and found['d'][1] < 0.5 * found['d'][0]
+
+
+def test_where_every_piece_sticks_the_pieces_stay_on_the_cone_and_d_and_mu_c_where_they_were(
+        ) -> None:
+    # on a cone reversing at 3 rad/s every piece sticks and nothing identifies d or mu_C:
+    # the twin's pieces must stay on the cone's surface and d, mu_C near the truth (the
+    # prior's centre). An analysis that updated height and friction force through sampled
+    # correlations took them off the surface (8 cm after 20 s) and d to 100 (doc/twin.md)
+    table = [[0.0, 0.0], [0.5, 3.0]]
+    for k in range(10):
+        sign = 1.0 if k % 2 == 0 else -1.0
+        table += [[2.0 * k + 1.5, sign * 3.0], [2.0 * k + 2.0, -sign * 3.0]]
+    profile = RotationProfile.from_table(table)
+    places = PLACES + [[-0.14, 0.06], [0.12, -0.09], [0.0, 0.15]]
+    q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in places])
+    plant, _ = add_particles(SimState(), PARAMS, q)
+    twin = Twin(PARAMS, TwinSettings(members=8, sigma=0.002))
+    rng = np.random.default_rng(30)
+    for k in range(1, 601):
+        t = k / 30.0
+        plant = advance(plant, PARAMS, profile, t).state
+        twin.cone_speed(t, profile.omega(t))
+        seen, _, _ = world_from_cone(plant.y, plant.angle, profile.omega(t))
+        twin.update(t, seen[:, :2] + rng.normal(0.0, 0.002, (plant.count, 2)))
+    assert np.all(np.abs(plant.y[:, 3:6]) < 0.01)  # they stuck (relative speed < 1 cm/s)
+    for state in twin.states:
+        x, y, z = state.y[:, 0:3].T
+        height = np.array([resting_height(MODEL, MODEL.product, a, b) for a, b in zip(x, y)])
+        assert np.max(np.abs(z - height)) < 1.0e-3
+    assert abs(np.mean(twin.log_d) - np.log(225.0)) < 0.3, np.exp(twin.log_d)
+    assert abs(np.mean(twin.mu_c) - 0.85) < 0.1, twin.mu_c
