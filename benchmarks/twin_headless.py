@@ -43,15 +43,20 @@ import numpy as np
 import yaml
 
 
-def write_stream(folder: Path, seconds: float) -> None:
-    """Simulate the plant and write detections.csv, cone.csv, scenario.yaml."""
-    model = ModelParams()
-    params = SimParams(model=model)
+def reversing_profile(seconds: float) -> RotationProfile:
+    """Return the stream's cone: up to 3 rad/s in 0.5 s, reversing every 2 s (0.5-s ramps)."""
     table = [[0.0, 0.0], [0.5, 3.0]]
     for k in range(int(seconds / 2.0) + 1):
         sign = 1.0 if k % 2 == 0 else -1.0
         table += [[2.0 * k + 1.5, sign * 3.0], [2.0 * k + 2.0, -sign * 3.0]]
-    profile = RotationProfile.from_table(table)
+    return RotationProfile.from_table(table)
+
+
+def write_stream(folder: Path, seconds: float) -> None:
+    """Simulate the plant and write detections.csv, cone.csv, scenario.yaml."""
+    model = ModelParams()
+    params = SimParams(model=model)
+    profile = reversing_profile(seconds)
     rng = np.random.default_rng(30)
     r = np.sqrt(rng.uniform(0.05 ** 2, 0.17 ** 2, 30))
     a = rng.uniform(0.0, 2.0 * np.pi, 30)

@@ -91,8 +91,9 @@ def test_where_every_piece_sticks_the_pieces_stay_on_the_cone_and_d_and_mu_c_whe
         ) -> None:
     # on a cone reversing at 3 rad/s every piece sticks and nothing identifies d or mu_C:
     # the twin's pieces must stay on the cone's surface and d, mu_C near the truth (the
-    # prior's centre). An analysis that updated height and friction force through sampled
-    # correlations took them off the surface (8 cm after 20 s) and d to 100 (doc/twin.md)
+    # prior's centre). An analysis that updated the height and the friction force's normal
+    # part through sampled correlations took them off the surface (10 cm in these 20 s),
+    # and d and mu_C with them (benchmarks/twin_sticking.py)
     table = [[0.0, 0.0], [0.5, 3.0]]
     for k in range(10):
         sign = 1.0 if k % 2 == 0 else -1.0
