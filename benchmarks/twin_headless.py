@@ -52,17 +52,22 @@ def reversing_profile(seconds: float) -> RotationProfile:
     return RotationProfile.from_table(table)
 
 
-def write_stream(folder: Path, seconds: float) -> None:
-    """Simulate the plant and write detections.csv, cone.csv, scenario.yaml."""
-    model = ModelParams()
-    params = SimParams(model=model)
-    profile = reversing_profile(seconds)
+def plant_start(params: SimParams) -> tuple[SimState, np.random.Generator]:
+    """Return the plant's 30 pieces at rest on the annulus, and the stream's noise source."""
+    model = params.model
     rng = np.random.default_rng(30)
     r = np.sqrt(rng.uniform(0.05 ** 2, 0.17 ** 2, 30))
     a = rng.uniform(0.0, 2.0 * np.pi, 30)
     q = np.array([[x, y, resting_height(model, model.product, x, y)]
                   for x, y in zip(r * np.cos(a), r * np.sin(a))])
-    plant, _ = add_particles(SimState(), params, q)
+    return add_particles(SimState(), params, q)[0], rng
+
+
+def write_stream(folder: Path, seconds: float) -> None:
+    """Simulate the plant and write detections.csv, cone.csv, scenario.yaml."""
+    params = SimParams(model=ModelParams())
+    profile = reversing_profile(seconds)
+    plant, rng = plant_start(params)
     with (folder / 'detections.csv').open('w', newline='') as d, \
             (folder / 'cone.csv').open('w', newline='') as c:
         detections, cone = csv.writer(d), csv.writer(c)

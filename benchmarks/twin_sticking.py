@@ -29,12 +29,11 @@ import time
 
 from calibration import calibration_line
 from cone_feeder_sim.physics.params import ModelParams
-from cone_feeder_sim.physics.simulation import (
-    add_particles, advance, resting_height, SimParams, SimState, warm_up, world_from_cone)
+from cone_feeder_sim.physics.simulation import advance, SimParams, warm_up, world_from_cone
 from cone_feeder_sim.twin.estimator import Twin, TwinSettings
 import numpy as np
 from scipy.spatial import cKDTree
-from twin_headless import reversing_profile
+from twin_headless import plant_start, reversing_profile
 
 
 def main() -> None:
@@ -45,15 +44,9 @@ def main() -> None:
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     warm_up()
-    model = ModelParams()
-    params = SimParams(model=model)
+    params = SimParams(model=ModelParams())
     profile = reversing_profile(args.seconds)
-    rng = np.random.default_rng(30)
-    r = np.sqrt(rng.uniform(0.05 ** 2, 0.17 ** 2, 30))
-    a = rng.uniform(0.0, 2.0 * np.pi, 30)
-    q = np.array([[x, y, resting_height(model, model.product, x, y)]
-                  for x, y in zip(r * np.cos(a), r * np.sin(a))])
-    plant, _ = add_particles(SimState(), params, q)
+    plant, rng = plant_start(params)
     twin = Twin(params, TwinSettings(members=args.members, sigma=0.002))
     wall = 0.0
     for k in range(1, int(round(30 * args.seconds)) + 1):
