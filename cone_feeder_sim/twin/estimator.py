@@ -70,8 +70,8 @@ MU_C_RANGE = (0.05, 5.0)
 #: to the model (the height follows x, y on the cone's surface): updated through the
 #: ensemble's sampled correlations with x, y, they took the pieces off the surface, d and
 #: mu_C drifting to what made such states fit (benchmarks/twin_sticking.py, 40 s where every
-#: piece sticks: largest height error 555 m, P 59 N, d 39 +- 1 for a truth of 225; so: 0.2
-#: mm, 0.01 N, d 239 +- 70).
+#: piece sticks: largest height error 555 m, P 59 N, d 39 +- 1 for a truth of 225; now
+#: 0.2 mm, 0.01 N, d 239 +- 70).
 ANALYSED = np.array([0, 1, 3, 4, 6, 7])
 
 
@@ -442,8 +442,8 @@ class Twin:
         Only :data:`ANALYSED` of each piece's state are updated; each piece keeps its height
         above the cone's surface where its x, y moved.
         """
-        n, k = len(ids), len(ANALYSED)
-        width = k * n
+        n, per = len(ids), len(ANALYSED)
+        width = per * n
         rows = [self._rows(s, ids) for s in self.states]
         ensemble = np.stack([np.concatenate([s.y[r][:, ANALYSED].ravel(), [ld, mu]])
                              for s, r, ld, mu in zip(self.states, rows, self.log_d, self.mu_c)])
@@ -451,10 +451,10 @@ class Twin:
         ensemble[:, :width] = centre + self.settings.inflation * (ensemble[:, :width] - centre)
         angle = self.states[0].angle
         seen = rotate_z(np.column_stack([xy[pairs[:, 1]], np.zeros(len(pairs))]), -angle)
-        columns = np.concatenate([k * pairs[:, 0], k * pairs[:, 0] + 1])  # x, y: first two
+        columns = np.concatenate([per * pairs[:, 0], per * pairs[:, 0] + 1])  # x, y: first
         values = np.concatenate([seen[:, 0], seen[:, 1]])
         sigma = np.full(len(columns), self.settings.sigma)
-        groups = (np.concatenate([np.repeat(np.arange(n), k), [-1, -1]])
+        groups = (np.concatenate([np.repeat(np.arange(n), per), [-1, -1]])
                   if len(self.states) < self.settings.localize_below else None)
         result = analyse(ensemble, columns, values, sigma, self.rng, groups)
         if self.settings.window <= 0.0:  # else the smoother analyses them, once a window
@@ -465,7 +465,7 @@ class Twin:
         for s, r, row in zip(self.states, rows, result.ensemble):
             y = s.y.copy()
             before = np.hypot(y[r, 0], y[r, 1])
-            y[r[:, None], ANALYSED] = row[:width].reshape(n, k)
+            y[r[:, None], ANALYSED] = row[:width].reshape(n, per)
             y[r, 2] -= model.h / model.r * (np.hypot(y[r, 0], y[r, 1]) - before)
             states.append(replace(s, y=y))
         self.states = [self._with_products(s, k) for k, s in enumerate(states)]
