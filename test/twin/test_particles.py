@@ -63,6 +63,18 @@ PLACES = [[0.10, 0.02], [-0.08, 0.09], [0.03, -0.13], [-0.12, -0.05], [0.06, 0.1
           [-0.02, -0.07], [0.07, -0.02]]
 
 
+def follow(twin: Twin, plant: SimState, profile: RotationProfile, seconds: float,
+           sigma: float, rng: np.random.Generator) -> SimState:
+    """Give the twin the plant's x, y with noise sigma (m) at 30 frames/s; return the plant."""
+    for k in range(1, int(round(30 * seconds)) + 1):
+        t = k / 30.0
+        plant = advance(plant, PARAMS, profile, t).state
+        twin.cone_speed(t, profile.omega(t))
+        seen, _, _ = world_from_cone(plant.y, plant.angle, profile.omega(t))
+        twin.update(t, seen[:, :2] + rng.normal(0.0, sigma, (plant.count, 2)))
+    return plant
+
+
 def test_d_and_mu_c_are_identified_where_the_pieces_slide() -> None:
     # the plant's d and mu_C are 2x and -0.15 from the twin's prior (d 225 +- 50 % on the
     # log scale, mu_C 0.85 +- 0.15); the cone reverses at 8 rad/s, the outer pieces slide.
@@ -72,13 +84,7 @@ def test_d_and_mu_c_are_identified_where_the_pieces_slide() -> None:
     q = np.array([[x, y, resting_height(MODEL, product, x, y)] for x, y in PLACES])
     plant, _ = add_particles(SimState(), PARAMS, q, products=[product] * len(q))
     twin = Twin(PARAMS, TwinSettings(members=32, sigma=0.001, mu_C_spread=0.15, seed=1))
-    rng = np.random.default_rng(0)
-    for k in range(1, 91):
-        t = k / 30.0
-        plant = advance(plant, PARAMS, profile, t).state
-        twin.cone_speed(t, profile.omega(t))
-        seen, _, _ = world_from_cone(plant.y, plant.angle, profile.omega(t))
-        twin.update(t, seen[:, :2] + rng.normal(0.0, 0.001, (plant.count, 2)))
+    follow(twin, plant, profile, 3.0, 0.001, np.random.default_rng(0))
     found = twin.parameters()
     z = {key: (found[key][0] - truth) / found[key][1]
          for key, truth in (('d', 450.0), ('mu_C', 0.7))}
@@ -103,13 +109,7 @@ def test_where_every_piece_sticks_the_pieces_stay_on_the_cone_and_d_and_mu_c_whe
     q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in places])
     plant, _ = add_particles(SimState(), PARAMS, q)
     twin = Twin(PARAMS, TwinSettings(members=8, sigma=0.002))
-    rng = np.random.default_rng(30)
-    for k in range(1, 601):
-        t = k / 30.0
-        plant = advance(plant, PARAMS, profile, t).state
-        twin.cone_speed(t, profile.omega(t))
-        seen, _, _ = world_from_cone(plant.y, plant.angle, profile.omega(t))
-        twin.update(t, seen[:, :2] + rng.normal(0.0, 0.002, (plant.count, 2)))
+    plant = follow(twin, plant, profile, 20.0, 0.002, np.random.default_rng(30))
     assert np.all(np.abs(plant.y[:, 3:6]) < 0.01)  # they stuck (relative speed < 1 cm/s)
     for state in twin.states:
         x, y, z = state.y[:, 0:3].T
