@@ -440,7 +440,9 @@ class Twin:
         Analyse the members against the pairs' detections; return NIS and its dof.
 
         Only :data:`ANALYSED` of each piece's state are updated; each piece keeps its height
-        above the cone's surface where its x, y moved.
+        above the cone's surface where its x, y moved, and the change of its velocity and
+        filter force in x, y gets the z part that keeps it along the surface (as
+        :mod:`..fit.shooting` places pieces).
         """
         n, per = len(ids), len(ANALYSED)
         width = per * n
@@ -460,13 +462,18 @@ class Twin:
         if self.settings.window <= 0.0:  # else the smoother analyses them, once a window
             self.log_d = np.clip(result.ensemble[:, width], *LOG_D_RANGE)
             self.mu_c = np.clip(result.ensemble[:, width + 1], *MU_C_RANGE)
-        model = self.params.model
+        slope = self.params.model.h / self.params.model.r
         states = []
         for s, r, row in zip(self.states, rows, result.ensemble):
             y = s.y.copy()
-            before = np.hypot(y[r, 0], y[r, 1])
+            before = y[r].copy()
             y[r[:, None], ANALYSED] = row[:width].reshape(n, per)
-            y[r, 2] -= model.h / model.r * (np.hypot(y[r, 0], y[r, 1]) - before)
+            change = y[r] - before
+            x, rho = y[r, 0:2], np.maximum(np.hypot(y[r, 0], y[r, 1]), 1e-9)
+            # along the surface: z follows rho, w_z and P_z their x, y parts' radial change
+            y[r, 2] -= slope * (rho - np.hypot(before[:, 0], before[:, 1]))
+            y[r, 5] -= slope * np.sum(x * change[:, 3:5], axis=1) / rho
+            y[r, 8] -= slope * np.sum(x * change[:, 6:8], axis=1) / rho
             states.append(replace(s, y=y))
         self.states = [self._with_products(s, k) for k, s in enumerate(states)]
         return result.nis, result.observed
