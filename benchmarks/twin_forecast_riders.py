@@ -31,10 +31,8 @@ from calibration import calibration_line
 from cone_feeder_sim.physics.simulation import warm_up
 from cone_feeder_sim.twin import run
 from cone_feeder_sim.twin.forecast import Forecast, forecast
-from cone_feeder_sim.twin.spec import load_twin
 import numpy as np
-from twin_headless import write_stream
-import yaml
+from twin_headless import stream_twin, write_stream
 
 
 def main() -> None:
@@ -63,10 +61,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         write_stream(folder, args.seconds)
-        (folder / 'twin.yaml').write_text(yaml.safe_dump(
-            {'scenario': 'scenario.yaml', 'detections': 'detections.csv', 'cone': 'cone.csv',
-             'members': args.members}))
-        run.run_twin(load_twin(folder / 'twin.yaml'), folder / 'out')
+        run.run_twin(stream_twin(folder, members=args.members), folder / 'out')
     print(f'{made[0]} forecasts, M = {args.members}: riders taken out {spent[True]:.1f} s, '
           f'every piece integrated {spent[False]:.1f} s; channel probabilities equal in '
           f'{equal[0]}', flush=True)

@@ -31,10 +31,8 @@ from calibration import calibration_line
 from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.simulation import SimParams, warm_up
 from cone_feeder_sim.twin.estimator import Twin, TwinSettings
-from cone_feeder_sim.twin.spec import load_twin
 import numpy as np
-from twin_headless import write_stream
-import yaml
+from twin_headless import stream_twin, write_stream
 
 
 def main() -> None:
@@ -49,9 +47,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         write_stream(folder, args.seconds)
-        (folder / 'twin.yaml').write_text(yaml.safe_dump(
-            {'scenario': 'scenario.yaml', 'detections': 'detections.csv', 'cone': 'cone.csv'}))
-        spec = load_twin(folder / 'twin.yaml')
+        spec = stream_twin(folder)
     times, first = np.unique(spec.detections[:, 0], return_index=True)
     frames = np.split(spec.detections[:, 1:3], first[1:])
     cone = dict(zip(spec.cone[:, 0].tolist(), spec.cone[:, 1].tolist()))

@@ -38,7 +38,7 @@ from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, warm_up, world_from_cone)
 from cone_feeder_sim.twin.run import run_twin
-from cone_feeder_sim.twin.spec import load_twin
+from cone_feeder_sim.twin.spec import load_twin, TwinSpec
 import numpy as np
 import yaml
 
@@ -86,6 +86,14 @@ def write_stream(folder: Path, seconds: float) -> None:
          'particles': [{'position': [0.1, 0.0, 0.0], 'on_surface': True}]}))
 
 
+def stream_twin(folder: Path, **settings: object) -> TwinSpec:
+    """Write a twin file for :func:`write_stream`'s files in folder (with settings); load it."""
+    (folder / 'twin.yaml').write_text(yaml.safe_dump(
+        {'scenario': 'scenario.yaml', 'detections': 'detections.csv', 'cone': 'cone.csv',
+         **settings}))
+    return load_twin(folder / 'twin.yaml')
+
+
 def main() -> None:
     """Print the calibration and the wall time per ensemble size."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
@@ -99,10 +107,7 @@ def main() -> None:
         folder = Path(tmp)
         write_stream(folder, args.seconds)
         for members, riders in ((m, r) for m in args.members for r in args.riders):
-            (folder / 'twin.yaml').write_text(yaml.safe_dump(
-                {'scenario': 'scenario.yaml', 'detections': 'detections.csv',
-                 'cone': 'cone.csv', 'members': members}))
-            spec = load_twin(folder / 'twin.yaml')
+            spec = stream_twin(folder, members=members)
             start = time.perf_counter()
             summary = run_twin(spec, folder / f'out{members}{riders}', riders=riders == 'true')
             wall = time.perf_counter() - start
