@@ -218,7 +218,7 @@ class Twin:
         self._smoother: list[SimState] | None = None
         #: the parameters' random walk over the window: (log d, mu_C) at its start and end
         #: (M,) each; None: a step each frame (no window yet, or window 0)
-        self._walk: tuple[Walk, Walk] | None = None
+        self._walk: Walk | None = None  # where the window's random walk ends
         self._predicted: list[np.ndarray] = []
         self._observed: list[np.ndarray] = []
 
@@ -527,9 +527,8 @@ class Twin:
         self._drifted = t
         scale = self.settings.drift * math.sqrt(self.settings.window)
         m = len(self.log_d)
-        self._walk = ((self.log_d, self.mu_c),
-                      (np.clip(self.log_d + scale * self.rng.standard_normal(m), *LOG_D_RANGE),
-                       np.clip(self.mu_c + scale * self.rng.standard_normal(m), *MU_C_RANGE)))
+        self._walk = (np.clip(self.log_d + scale * self.rng.standard_normal(m), *LOG_D_RANGE),
+                      np.clip(self.mu_c + scale * self.rng.standard_normal(m), *MU_C_RANGE))
         self.states = [self._with_products(s, k) for k, s in enumerate(self.states)]
         if not all(s.count for s in self.states):
             return
@@ -538,7 +537,7 @@ class Twin:
         base = remove_particles(first, sorted(set(first.ids.tolist()) - set(held.tolist())))
         base = replace(base, y=np.mean([s.y[self._rows(s, base.ids)] for s in self.states],
                                        axis=0))
-        self._smoother = [self._with_products(base, k, self._walk[1])
+        self._smoother = [self._with_products(base, k, self._walk)
                           for k in range(len(self.states))]
 
     def _window_frame(self, t: float, ids: np.ndarray, xy: np.ndarray) -> None:
@@ -602,7 +601,7 @@ class Twin:
     def _drift(self, t: float) -> None:
         """Move the parameters along their random walk to t (s): the window's, or a step."""
         if self._walk is not None:  # a Brownian bridge to the walk's end at the window's end
-            _, (log_d_end, mu_c_end) = self._walk
+            log_d_end, mu_c_end = self._walk
             end = self._window_t0 + self.settings.window
             step, left = max(t - self._drifted, 0.0), max(end - self._drifted, 0.0)
             self._drifted = t
