@@ -78,8 +78,9 @@ def main() -> None:
     print(calibration_line())
     warm_up()
     case('prior right', {'d': 225.0, 'mu_C': 0.85},
-         TwinSettings(sigma=0.001, d_spread=0.05, mu_C_spread=0.01, seed=1))
-    case('prior wrong', {'d': 450.0, 'mu_C': 0.7}, TwinSettings(sigma=0.001, seed=1))
+         TwinSettings(members=32, sigma=0.001, d_spread=0.05, mu_C_spread=0.01,
+                      seed=1))
+    case('prior wrong', {'d': 450.0, 'mu_C': 0.7}, TwinSettings(members=32, sigma=0.001, seed=1))
     print(calibration_line())
 
 

@@ -109,7 +109,7 @@ class TwinSettings:
     which 16 members estimate and localization cuts.
     """
 
-    members: int = 32
+    members: int = 8
     sigma: float = 0.002
     d: float = 225.0
     d_spread: float = 0.5
@@ -424,10 +424,13 @@ class Twin:
     def _common(self) -> np.ndarray:
         ids = self.states[0].ids
         for s in self.states[1:]:
-            ids = ids[np.isin(ids, s.ids)]
+            if not np.array_equal(s.ids, ids):  # the members mostly hold the same pieces
+                ids = ids[np.isin(ids, s.ids)]
         return ids
 
     def _rows(self, state: SimState, ids: np.ndarray) -> np.ndarray:
+        if np.array_equal(state.ids, ids):
+            return np.arange(len(ids), dtype=np.int64)
         order = {int(i): k for k, i in enumerate(state.ids)}
         return np.array([order[int(i)] for i in ids], dtype=np.int64)
 

@@ -24,7 +24,7 @@ A twin file is a YAML mapping::
     cone: cone.csv             # columns t, omega (s, rad/s), or an MCAP file (a JointState
                                # topic: cone_topic, default /cone_state; joint cone)
     # defaults:
-    members: 32                # the ensemble's size
+    members: 8                 # the ensemble's size
     sigma: 0.002               # the detections' noise (m)
     horizons: [0.5, 1.0, 2.0]  # forecast horizons (s)
     every: 0.1                 # forecast every (s)
@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from .estimator import TUNING
+from .estimator import TUNING, TwinSettings
 from .streams import mcap_cone, mcap_detections
 from ..errors import ConeFeederError, TwinError
 from ..feeder.scenario import Scenario
@@ -77,7 +77,7 @@ class TwinSpec:
     scenario: Scenario
     detections: np.ndarray
     cone: np.ndarray
-    members: int = 32
+    members: int = TwinSettings.members
     sigma: float = 0.002
     horizons: tuple[float, ...] = (0.5, 1.0, 2.0)
     every: float = 0.1
@@ -158,7 +158,7 @@ def load_twin(path: str | Path) -> TwinSpec:
         raise TwinError(f'horizons must be a list of numbers in (0, 60] s, got {horizons!r}')
     return TwinSpec(
         scenario=scenario, detections=detections, cone=cone,
-        members=_number(content, 'members', 32, 2, integer=True),
+        members=_number(content, 'members', TwinSettings.members, 2, integer=True),
         sigma=float(_number(content, 'sigma', 0.002, 1e-6)),
         horizons=tuple(sorted(float(h) for h in horizons)),
         every=float(_number(content, 'every', 0.1, 1e-3)),

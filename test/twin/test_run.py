@@ -23,6 +23,7 @@ from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
+from cone_feeder_sim.twin.association import GATE_CHI2
 from cone_feeder_sim.twin.run import FILES, run_twin
 from cone_feeder_sim.twin.spec import load_twin
 import numpy as np
@@ -35,12 +36,19 @@ ROTATION = [[0.0, 0.0], [0.5, 6.0]]
 PLACES = [[0.10, 0.02], [-0.08, 0.09], [0.03, -0.13], [-0.12, -0.05], [0.20, 0.03]]
 
 
-def write_streams(folder: Path, seconds: float = 1.5) -> None:
-    """Simulate the plant; write detections.csv (with one bad row), cone.csv, the files."""
+def write_streams(folder: Path, seconds: float = 1.5) -> dict[float, int]:
+    """
+    Simulate the plant; write detections.csv (with one bad row), cone.csv, the files.
+
+    Return, per frame's stamp (s, to 1e-6), how many of its detections are beyond the
+    association's gate by their noise alone (from a perfect twin, chi-square with 2 degrees
+    of freedom): the gate's 0.999 quantile leaves out one detection in a thousand so.
+    """
     profile = RotationProfile.from_table(ROTATION)
     q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in PLACES])
     plant, _ = add_particles(SimState(), PARAMS, q)
     rng = np.random.default_rng(0)
+    outside: dict[float, int] = {}
     with (folder / 'detections.csv').open('w', newline='') as d, \
             (folder / 'cone.csv').open('w', newline='') as c:
         detections, cone = csv.writer(d), csv.writer(c)
@@ -51,7 +59,9 @@ def write_streams(folder: Path, seconds: float = 1.5) -> None:
             plant = advance(plant, PARAMS, profile, t).state
             cone.writerow([f'{t:.6f}', profile.omega(t)])
             seen, _, _ = world_from_cone(plant.y, plant.angle, profile.omega(t))
-            seen[:, :2] += rng.normal(0.0, 0.001, (plant.count, 2))
+            noise = rng.normal(0.0, 0.001, (plant.count, 2))
+            seen[:, :2] += noise
+            outside[round(t, 6)] = int(np.sum(np.sum((noise / 0.001) ** 2, axis=1) > GATE_CHI2))
             for (x, y, z), i in zip(seen, plant.ids):
                 detections.writerow([f'{t:.6f}', x, y, z, '' if k % 7 == 0 else int(i)])
             if k == 20:  # a bad frame of its own stamp: a coordinate not finite
@@ -62,6 +72,7 @@ def write_streams(folder: Path, seconds: float = 1.5) -> None:
     (folder / 'twin.yaml').write_text(yaml.safe_dump(
         {'scenario': 'scenario.yaml', 'detections': 'detections.csv', 'cone': 'cone.csv',
          'sigma': 0.001}))
+    return outside
 
 
 def read(path: Path) -> list[dict]:
@@ -72,7 +83,7 @@ def read(path: Path) -> list[dict]:
 
 def test_the_command_writes_the_forecasts(tmp_path: Path,
                                           capsys: pytest.CaptureFixture) -> None:
-    write_streams(tmp_path)
+    outside = write_streams(tmp_path)
     out = tmp_path / 'out'
     assert main(['twin', str(tmp_path / 'twin.yaml'), '--out', str(out)]) == 0
     printed = capsys.readouterr().err
@@ -97,7 +108,12 @@ def test_the_command_writes_the_forecasts(tmp_path: Path,
     assert len(frames) == 45 and int(frames[0]['births']) == 5
     report = (out / 'report.png').read_bytes()
     assert report[:8] == b'\x89PNG\r\n\x1a\n' and len(report) > 20000
-    assert all(int(f['associated']) == int(f['detections']) for f in frames[1:])
+    # every detection after the first frame is associated, but for those whose noise alone
+    # is beyond the gate (this stream has one: 3.8 sigma at 1.1 s; 8 members leave it out)
+    assert sum(outside.values()) == 1
+    for f in frames[1:]:
+        detections, left_out = int(f['detections']), outside[round(float(f['t']), 6)]
+        assert detections - left_out <= int(f['associated']) <= detections, f
 
 
 @pytest.mark.parametrize(('change', 'message'), [
