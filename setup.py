@@ -109,6 +109,7 @@ setup(
             'example_controller = cone_feeder_sim.ros.example_controller:main',
             'policy_controller = cone_feeder_sim.ros.policy_controller:main',
             'twin_node = cone_feeder_sim.ros.twin_node:main',
+            'camera_node = cone_feeder_sim.ros.camera_node:main',
         ],
     },
 )

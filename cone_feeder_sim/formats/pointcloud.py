@@ -30,8 +30,8 @@ import numpy as np
 
 from ..errors import MessageError
 
-__all__ = ['EXIT_DTYPE', 'PACK_DTYPE', 'POINT_FIELD_TYPES', 'STATE_DTYPE', 'TWIN_PIECE_DTYPE',
-           'cloud_points', 'point_dtype', 'point_fields']
+__all__ = ['DETECTION_DTYPE', 'EXIT_DTYPE', 'PACK_DTYPE', 'POINT_FIELD_TYPES', 'STATE_DTYPE',
+           'TWIN_PIECE_DTYPE', 'cloud_points', 'point_dtype', 'point_fields']
 
 #: sensor_msgs/PointField datatypes -> numpy type codes (without byte order).
 POINT_FIELD_TYPES = {1: 'i1', 2: 'u1', 3: 'i2', 4: 'u2', 5: 'i4', 6: 'u4', 7: 'f4', 8: 'f8'}
@@ -51,6 +51,15 @@ EXIT_DTYPE = np.dtype({
     'formats': ['<f8'] * 9 + ['<u4', '<u4'],
     'offsets': [0, 8, 16, 24, 32, 40, 48, 56, 64, 72, 76],
     'itemsize': 80})
+
+
+#: ``detections`` points as ``camera_node`` publishes them (twin_node's input; a camera's may
+#: have fewer or more fields): position (m), track_id; 16 bytes.
+DETECTION_DTYPE = np.dtype({
+    'names': ['x', 'y', 'z', 'track_id'],
+    'formats': ['<f4', '<f4', '<f4', '<u4'],
+    'offsets': [0, 4, 8, 12],
+    'itemsize': 16})
 
 
 #: ``twin/pieces`` points: the twin's estimate of each piece: position (m; z on the cone's

@@ -222,6 +222,13 @@ TWIN_TOPICS: Mapping[str, TopicSpec] = {spec.name: spec for spec in (
     TopicSpec('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', 'out', STATE_QOS),
 )}
 
+#: Every topic of ``camera_node``: the plant's true pieces in (sim_node's ``particle_states``),
+#: the camera's detections out (twin_node's ``detections``).
+CAMERA_TOPICS: Mapping[str, TopicSpec] = {spec.name: spec for spec in (
+    TopicSpec('particle_states', 'sensor_msgs/msg/PointCloud2', 'in', STATE_QOS),
+    TopicSpec('detections', 'sensor_msgs/msg/PointCloud2', 'out', SENSOR_QOS),
+)}
+
 #: The topics the headless runner writes (a scenario has no inputs and no wall clock).
 RUNNER_TOPICS = ('particles', 'particle_states', 'exit_events', 'channel_mass', 'cone_state',
                  'markers')

@@ -24,6 +24,7 @@ the horizons, from the members), ``spec``, ``streams`` and ``run`` (the headless
 ``cone-feeder-sim twin`` over recorded CSV or MCAP streams), ``frames`` (the inputs'
 checks), ``live`` (``Follower``: the twin frame by frame, as ``twin_node`` runs it; late
 frames analysed again from a snapshot), ``messages`` (its estimates as standard messages)
-and ``particles`` (the parameters' particle step once per window). Still to come: the
-headless twin's report, contact between pieces in the twin. No ROS here.
+, ``particles`` (the parameters' particle step once per window) and ``camera`` (a camera
+standing in for the real one: noise, misses, false detections, swapped track ids; for
+``camera_node``). No ROS here.
 """

@@ -197,9 +197,10 @@ class Follower:
         """
         later = [k for k, (t, _, _) in enumerate(self._history) if t > late.t]
         if not later or self._history[later[0]][1].t > late.t:
+            since = self._history[0][1].t if self._history else self.twin.t
             raise ValueError(f'detections at t = {late.t} s are older than the twin '
-                             f'({self.twin.t} s) by more than max_delay '
-                             f'({self.settings.max_delay} s)')
+                             f'({self.twin.t} s) can go back to ({since:g} s: max_delay '
+                             f'{self.settings.max_delay} s, or the twin began later)')
         first = later[0]
         _, twin, _ = self._history[first]
         frames = [found for _, _, found in list(self._history)[first:]]

@@ -21,6 +21,7 @@ from cone_feeder_sim.physics.params import InteractionParams, ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
+from cone_feeder_sim.twin.camera import CameraSettings, observe
 from cone_feeder_sim.twin.estimator import TwinSettings
 from cone_feeder_sim.twin.frames import DetectionFrame
 from cone_feeder_sim.twin.live import Follower, LiveSettings
@@ -155,16 +156,10 @@ def camera(seconds: float, seed: int) -> list[tuple[float, float, DetectionFrame
     places = [[0.10, 0.02], [0.10, 0.02 + touch], [-0.08, 0.09], [0.03, -0.13],
               [0.03 + touch, -0.13], [-0.12, -0.05]]
     out = []
+    lens = CameraSettings(sigma=0.0015, miss=0.1, false_rate=0.3, radius=0.25, swap=0.0)
     for t, omega, plant, seen in plant_frames(params, profile, places, seconds):
-        kept = rng.random(plant.count) > 0.1
-        xy = seen[kept] + rng.normal(0.0, 0.0015, (int(kept.sum()), 2))
-        ids = plant.ids[kept].astype(np.uint32)
-        if rng.random() < 0.3:
-            r, a = 0.25 * np.sqrt(rng.random()), 2.0 * np.pi * rng.random()
-            xy = np.vstack([xy, [r * np.cos(a), r * np.sin(a)]])
-            ids = np.append(ids, np.uint32(999))
-        order = rng.permutation(len(xy))
-        out.append((t, omega, DetectionFrame(t, xy[order], None, ids[order]), seen))
+        xy, ids = observe(lens, rng, seen, plant.ids)
+        out.append((t, omega, DetectionFrame(t, xy, None, ids), seen))
     return out
 
 
