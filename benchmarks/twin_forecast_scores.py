@@ -15,10 +15,12 @@
 Study: the twin's forecasts against what the plant then does, and against five baselines.
 
 The plant is the physics core with a feed (a piece every 0.2 s at rest on the annulus
-0.05-0.15 m, default product) on a cone that speeds up to 8 rad/s and reverses every 2 s;
-the camera sees it at 30 frames/s with 2 mm of noise and misses 5 % of the pieces in each
-frame. The twin (16 members, the file's prior) follows it, and from 2 s on forecasts every
-0.25 s under the commanded rotation (a controller knows its command). Scores:
+0.05-0.15 m; the default product, or with --truth D MU_C its d and mu_C, the twin's prior
+and the open loop's staying the default's) on a cone that speeds up to 8 rad/s and reverses
+every 2 s; the camera sees it at 30 frames/s with 2 mm of noise and misses 5 % of the
+pieces in each frame. The twin (16 members, the file's prior) follows it, and from 2 s on
+forecasts every 0.25 s under the commanded rotation (a controller knows its command).
+Scores:
 
 - per piece, at a lead L of 0.25, 0.5, 1 and 2 s before its exit: how often the twin's most
   likely channel is the one it fell into, against an open-loop forecast (the model run from
@@ -30,9 +32,11 @@ frame. The twin (16 members, the file's prior) follows it, and from 2 s on forec
   run) and the empty forecast (none)::
 
     .venv/bin/python benchmarks/twin_forecast_scores.py [--seconds 12] [--members 16] [--seed 1]
+        [--truth 315 0.78]
 """
 
 import argparse
+from dataclasses import replace
 import math
 import time
 
@@ -124,14 +128,20 @@ def main() -> None:
     parser.add_argument('--seconds', type=float, default=12.0)
     parser.add_argument('--members', type=int, default=16)
     parser.add_argument('--seed', type=int, default=1, help="the twin's seed")
+    parser.add_argument('--truth', type=float, nargs=2, metavar=('D', 'MU_C'),
+                        help="the plant's d and mu_C (default: the prior's)")
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     warm_up()
     model = ModelParams()
-    params = SimParams(model=model)
+    params = SimParams(model=model)  # the prior: the twin's and the open loop's
+    truth = params if args.truth is None else SimParams(model=replace(model, product=replace(
+        model.product, d=args.truth[0], mu_C=args.truth[1])))
+    print(f'plant d = {truth.model.product.d:g}, mu_C = {truth.model.product.mu_C:g}; '
+          f'prior d = {model.product.d:g}, mu_C = {model.product.mu_C:g}', flush=True)
     profile = reversing(args.seconds + 3.0)
     start = time.perf_counter()
-    plant = simulate_plant(params, profile, args.seconds)
+    plant = simulate_plant(truth, profile, args.seconds)
     exits = plant['exits']
     exit_of = {i: (t, c) for i, t, c, _ in exits}
     closed = open_loop(params, profile, plant['first'], args.seconds)

@@ -71,10 +71,11 @@ class CameraSettings:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        """Refuse a setting out of its range (ParameterError naming it)."""
+        """Validate every field against :data:`CAMERA_LIMITS`; name the key on failure."""
         for item in fields(self):
             check = check_integer if item.name == 'seed' else check_number
-            check(item.name, getattr(self, item.name), CAMERA_LIMITS[item.name])
+            object.__setattr__(self, item.name, check(item.name, getattr(self, item.name),
+                                                      CAMERA_LIMITS[item.name]))
 
 
 def observe(settings: CameraSettings, rng: np.random.Generator, positions: np.ndarray,
