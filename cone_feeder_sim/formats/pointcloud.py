@@ -30,8 +30,8 @@ import numpy as np
 
 from ..errors import MessageError
 
-__all__ = ['DETECTION_DTYPE', 'EXIT_DTYPE', 'PACK_DTYPE', 'POINT_FIELD_TYPES', 'STATE_DTYPE',
-           'TWIN_PIECE_DTYPE', 'cloud_points', 'point_dtype', 'point_fields']
+__all__ = ['DETECTION_DTYPE', 'EXIT_DTYPE', 'NO_TRACK', 'PACK_DTYPE', 'POINT_FIELD_TYPES',
+           'STATE_DTYPE', 'TWIN_PIECE_DTYPE', 'cloud_points', 'point_dtype', 'point_fields']
 
 #: sensor_msgs/PointField datatypes -> numpy type codes (without byte order).
 POINT_FIELD_TYPES = {1: 'i1', 2: 'u1', 3: 'i2', 4: 'u2', 5: 'i4', 6: 'u4', 7: 'f4', 8: 'f8'}
@@ -65,13 +65,16 @@ DETECTION_DTYPE = np.dtype({
 #: ``twin/pieces`` points: the twin's estimate of each piece: position (m; z on the cone's
 #: surface), id, mass (kg), sigma_x, sigma_y (m, the members' spread), the most likely
 #: channel (0: it stays on the cone over the longest horizon), its probability and the
-#: expected time to the exit (s from the stamp; NaN where no member lets it leave); 40 bytes.
+#: expected time to the exit (s from the stamp; NaN where no member lets it leave), the
+#: camera's track id last associated with it (:data:`NO_TRACK`: none given); 44 bytes.
 TWIN_PIECE_DTYPE = np.dtype({
     'names': ['x', 'y', 'z', 'id', 'mass', 'sigma_x', 'sigma_y', 'channel', 'probability',
-              'time_to_exit'],
-    'formats': ['<f4'] * 3 + ['<u4'] + ['<f4'] * 3 + ['<u4'] + ['<f4'] * 2,
-    'offsets': [0, 4, 8, 12, 16, 20, 24, 28, 32, 36],
-    'itemsize': 40})
+              'time_to_exit', 'track_id'],
+    'formats': ['<f4'] * 3 + ['<u4'] + ['<f4'] * 3 + ['<u4'] + ['<f4'] * 2 + ['<u4'],
+    'offsets': [0, 4, 8, 12, 16, 20, 24, 28, 32, 36, 40],
+    'itemsize': 44})
+#: ``twin/pieces``' track_id of a piece no frame gave a track id for.
+NO_TRACK = 0xFFFFFFFF
 
 #: ``pack_events`` points: t (s, discharge time), mass (kg, true), measured (kg, the load
 #: cells' sum), giveaway (kg), pack (index from 1), heads (bit h-1 set: head h discharged);

@@ -23,7 +23,7 @@ optionally track_id and mass; ``sim_node``'s ``particle_states`` has this layout
 ``cone_state`` (sensor_msgs/JointState, joint ``cone``: the measured speed). It publishes
 
 - ``twin/pieces`` (PointCloud2: each piece's position, spread, most likely channel, its
-  probability and the time to its exit),
+  probability, the time to its exit and the camera's track id last associated with it),
 - ``twin/channel_forecast`` (Float64MultiArray: per horizon and channel, the expected mass
   and its spread, kg),
 - ``twin/parameters`` (Float64MultiArray: d, its spread, mu_C, its spread),
@@ -273,7 +273,7 @@ class TwinNode(GuardedNode):
         masses = np.array([twin.masses[int(i)] for i in ids], dtype=float)
         outlook = self._follower.outlook
         self._outputs.publish(self._pub['twin/pieces'], pieces_message(
-            head, self._model, ids, mean, covariance, masses, outlook), ns)
+            head, self._model, ids, mean, covariance, masses, outlook, twin.tracks), ns)
         if outlook is not None and outlook is not self._published_outlook:
             self._published_outlook = outlook
             self._outputs.publish(self._pub['twin/channel_forecast'],

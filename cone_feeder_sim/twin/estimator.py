@@ -206,6 +206,8 @@ class Twin:
         self.last_seen: dict[int, float] = {}
         #: the frames each piece was seen in, up to settings.confirm (confirmed there)
         self.hits: dict[int, int] = {}
+        #: the camera's track id last associated with each piece (where frames carry them)
+        self.tracks: dict[int, int] = {}
         #: the pieces the predictions since the last frame dropped as gone, and the exits
         #: among them the twin saw (confirmed pieces)
         self._exits: list[int] = []
@@ -230,7 +232,7 @@ class Twin:
         other.rng = copy.deepcopy(self.rng)
         other.times, other.omegas = list(self.times), list(self.omegas)
         other.masses, other.last_seen = dict(self.masses), dict(self.last_seen)
-        other.hits = dict(self.hits)
+        other.hits, other.tracks = dict(self.hits), dict(self.tracks)
         other._exits, other._left = list(self._exits), list(self._left)
         other._smoother = None if self._smoother is None else list(self._smoother)
         other._predicted, other._observed = list(self._predicted), list(self._observed)
@@ -337,13 +339,15 @@ class Twin:
         return {'d': (float(d.mean()), float(d.std(ddof=1))),
                 'mu_C': (float(self.mu_c.mean()), float(self.mu_c.std(ddof=1)))}
 
-    def update(self, t: float, detections: np.ndarray,
-               masses: np.ndarray | None = None) -> Frame:
+    def update(self, t: float, detections: np.ndarray, masses: np.ndarray | None = None,
+               track_ids: np.ndarray | None = None) -> Frame:
         """
         Take a frame of detections at t (s): predict to t, associate, analyse, births.
 
         detections: (k, 2 or 3) world-frame positions (m; z is not used); masses: (k,) (kg;
-        NaN: not given), or None: the product's mean mass.
+        NaN: not given), or None: the product's mean mass; track_ids: (k,) the camera's
+        track ids, or None: not given. The association is by position alone; each piece
+        keeps the track id of the detection last associated with it (:attr:`tracks`).
         """
         detections = np.asarray(detections, dtype=float).reshape(-1, detections.shape[-1])
         if not np.isfinite(detections).all():
@@ -362,8 +366,10 @@ class Twin:
         nis, observed = 0.0, 0
         if len(match.pairs):
             nis, observed = self._analyse(ids, match.pairs, detections[:, :2])
-            for piece, _ in match.pairs:
+            for piece, seen in match.pairs:
                 i = int(ids[piece])
+                if track_ids is not None:
+                    self.tracks[i] = int(track_ids[seen])
                 self.last_seen[i] = t
                 self.hits[i] = min(self.hits.get(i, 0) + 1, self.settings.confirm)
             self._window_frame(t, ids[match.pairs[:, 0]], detections[match.pairs[:, 1], :2])
@@ -374,7 +380,11 @@ class Twin:
         born = spare[np.hypot(detections[spare, 0], detections[spare, 1]) < rim]
         if len(born):
             weights = None if masses is None else np.asarray(masses, dtype=float)[born]
+            first = self.states[0].next_id
             self._birth(detections[born, :2], weights, t)
+            if track_ids is not None:
+                self.tracks.update(zip(range(first, first + len(born)),
+                                       (int(track_ids[k]) for k in born)))
         confirm, settings = self.settings.confirm, self.settings
         dead = [i for i in ids.tolist()
                 if t - self.last_seen.get(i, t) > (settings.death_after
@@ -600,6 +610,7 @@ class Twin:
         for i in ids:
             self.last_seen.pop(i, None)
             self.hits.pop(i, None)
+            self.tracks.pop(i, None)
 
     def _drift(self, t: float) -> None:
         """Move the parameters along their random walk to t (s): the window's, or a step."""

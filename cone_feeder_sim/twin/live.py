@@ -220,7 +220,7 @@ class Follower:
         start = time.perf_counter()
         before = twin.t
         self._remember(found.t, found)
-        done = twin.update(found.t, found.xy, found.masses)
+        done = twin.update(found.t, found.xy, found.masses, found.track_ids)
         self.last_frame = found.t
         self.last = done
         window = self._window

@@ -15,7 +15,8 @@
 The twin's estimates as standard messages (mappings the CDR codec encodes; no ROS here).
 
 - ``twin/pieces``: sensor_msgs/PointCloud2 of :data:`~..formats.pointcloud.TWIN_PIECE_DTYPE`
-  (each piece's position, spread, most likely channel, its probability, time to the exit);
+  (each piece's position, spread, most likely channel, its probability, time to the exit,
+  the camera's track id last associated with it);
 - ``twin/channel_forecast``: std_msgs/Float64MultiArray, dimensions horizon x channel x
   (mass, spread) (kg), the horizons in the first dimension's label;
 - ``twin/parameters``: std_msgs/Float64MultiArray, d, its spread, mu_C, its spread, the keys
@@ -28,7 +29,7 @@ import numpy as np
 
 from .forecast import Forecast
 from ..formats.messages import cloud_message
-from ..formats.pointcloud import TWIN_PIECE_DTYPE
+from ..formats.pointcloud import NO_TRACK, TWIN_PIECE_DTYPE
 from ..physics.params import ModelParams
 from ..physics.simulation import resting_height
 
@@ -37,12 +38,14 @@ __all__ = ['channel_forecast_message', 'parameters_message', 'pieces_message']
 
 def pieces_message(head: dict[str, Any], model: ModelParams, ids: np.ndarray,
                    mean: np.ndarray, covariance: np.ndarray, masses: np.ndarray,
-                   outlook: Forecast | None) -> dict[str, Any]:
+                   outlook: Forecast | None, tracks: dict[int, int] | None = None
+                   ) -> dict[str, Any]:
     """
     Return the ``twin/pieces`` cloud.
 
     ids (n,); mean (n, 2) m; covariance (n, 2, 2) m^2; masses (n,) kg; outlook: the last
-    forecast (its pieces matched by id; channel 0 and NaN where it has none).
+    forecast (its pieces matched by id; channel 0 and NaN where it has none); tracks: the
+    camera's track id of each piece (``Twin.tracks``; NO_TRACK where it has none).
     """
     points = np.zeros(len(ids), dtype=TWIN_PIECE_DTYPE)
     points['x'], points['y'] = mean[:, 0], mean[:, 1]
@@ -52,6 +55,7 @@ def pieces_message(head: dict[str, Any], model: ModelParams, ids: np.ndarray,
     points['sigma_x'] = np.sqrt(covariance[:, 0, 0])
     points['sigma_y'] = np.sqrt(covariance[:, 1, 1])
     points['time_to_exit'] = np.nan
+    points['track_id'] = [(tracks or {}).get(int(i), NO_TRACK) & 0xFFFFFFFF for i in ids]
     if outlook is not None and len(outlook.ids):
         best, probability = outlook.most_likely()
         row = {int(i): k for k, i in enumerate(outlook.ids)}

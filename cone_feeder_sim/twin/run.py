@@ -22,8 +22,9 @@ measured speed held). A bad frame (a coordinate not finite, more than
 the twin goes on; so is a cone speed that is not finite. The output directory gets:
 
 - ``channel_forecast.csv``: t, horizon, channel, mass, spread (s, s, -, kg, kg);
-- ``pieces.csv``: t, piece, x, y, channel (0: stays), probability, exit_time (s, -, m, m,
-  -, -, s; exit_time empty where no member lets the piece leave);
+- ``pieces.csv``: t, piece, x, y, channel (0: stays), probability, exit_time, track_id (s,
+  -, m, m, -, -, s, -; exit_time empty where no member lets the piece leave, track_id: the
+  camera's track id last associated with the piece, empty where the detections have none);
 - ``parameters.csv``: t, key, estimate, spread;
 - ``frames.csv``: t, detections, associated, births, deaths, exits, nis, observed (the
   diagnostics; nis over observed is the consistency test);
@@ -47,6 +48,7 @@ from .forecast import forecast
 from .frames import detection_frame
 from .spec import TwinSpec
 from ..errors import TwinError
+from ..formats.pointcloud import NO_TRACK
 from ..physics.simulation import SimParams
 
 __all__ = ['run_twin', 'TwinSummary']
@@ -54,7 +56,7 @@ __all__ = ['run_twin', 'TwinSummary']
 #: The output files and their columns (one table, written once).
 FILES = {
     'channel_forecast.csv': ('t', 'horizon', 'channel', 'mass', 'spread'),
-    'pieces.csv': ('t', 'piece', 'x', 'y', 'channel', 'probability', 'exit_time'),
+    'pieces.csv': ('t', 'piece', 'x', 'y', 'channel', 'probability', 'exit_time', 'track_id'),
     'parameters.csv': ('t', 'key', 'estimate', 'spread'),
     'frames.csv': ('t', 'detections', 'associated', 'births', 'deaths', 'exits', 'nis',
                    'observed'),
@@ -109,10 +111,13 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
                     log(f'cone speed refused: {exc}')
                 pending = next(cone, None)
             rows = spec.detections[a:b]
-            points = np.rec.fromarrays(rows[:, 1:4].T, names=('x', 'y', 'mass'))
+            points = np.rec.fromarrays(rows[:, 1:5].T, names=('x', 'y', 'mass', 'track'))
             try:
                 found = detection_frame(t, points)
-                frame = twin.update(t, found.xy, found.masses)
+                known = np.isfinite(points['track'])
+                tracks = (np.where(known, points['track'], NO_TRACK).astype(np.int64)
+                          if known.any() else None)
+                frame = twin.update(t, found.xy, found.masses, tracks)
             except TwinError as exc:
                 refused += 1
                 log(str(exc))
@@ -151,7 +156,9 @@ def _write_forecast(twin: Twin, spec: TwinSpec, writers: dict, riders: bool) -> 
     ids, mean, _ = twin.pieces()
     best, probability = result.most_likely()
     for i, (x, y), c, p, when in zip(ids.tolist(), mean, best, probability, result.exit_time):
+        track = twin.tracks.get(i)
         writers['pieces.csv'].writerow([t, i, f'{x:.6f}', f'{y:.6f}', int(c), f'{p:.4g}',
-                                        '' if np.isnan(when) else f'{when:.6f}'])
+                                        '' if np.isnan(when) else f'{when:.6f}',
+                                        '' if track is None else track])
     for key, (estimate, spread) in twin.parameters().items():
         writers['parameters.csv'].writerow([t, key, f'{estimate:.6g}', f'{spread:.4g}'])

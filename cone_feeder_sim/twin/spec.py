@@ -68,8 +68,8 @@ class TwinSpec:
     """
     A validated twin file.
 
-    scenario: the machine and the product prior; detections: (k, 4) rows t (s), x, y (m),
-    mass (kg, NaN: not given), sorted by t (z and track_id are not read); cone: (j, 2) rows
+    scenario: the machine and the product prior; detections: (k, 5) rows t (s), x, y (m),
+    mass (kg), track_id (NaN: not given), sorted by t (z is not read); cone: (j, 2) rows
     t (s), omega (rad/s), sorted; members, sigma (m), horizons (s), every (s), seed as in the file;
     tuning: the other estimator settings the file sets (:data:`TUNING`).
     """
@@ -148,7 +148,8 @@ def load_twin(path: str | Path) -> TwinSpec:
             raise TwinError(f'{key} must name a topic, got {content[key]!r}')
     found, speeds = base / content['detections'], base / content['cone']
     detections = (mcap_detections(found, content.get('detections_topic'))
-                  if found.suffix == '.mcap' else _rows(found, ('t', 'x', 'y'), ('mass',)))
+                  if found.suffix == '.mcap'
+                  else _rows(found, ('t', 'x', 'y'), ('mass', 'track_id')))
     cone = (mcap_cone(speeds, content.get('cone_topic')) if speeds.suffix == '.mcap'
             else _rows(speeds, ('t', 'omega'), ()))
     horizons = content.get('horizons', [0.5, 1.0, 2.0])

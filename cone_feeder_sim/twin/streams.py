@@ -51,7 +51,7 @@ def _recording(path: Path, topic: str | None, defaults: tuple[str, ...], type_na
 
 
 def mcap_detections(path: Path, topic: str | None = None) -> np.ndarray:
-    """Return the detections (k, 4): t (s), x, y (m), mass (kg, NaN: not given), sorted."""
+    """Return the detections (k, 5): t (s), x, y (m), mass (kg), track_id (NaN: not given)."""
     recording, chosen = _recording(path, topic, DETECTION_TOPICS, 'sensor_msgs/msg/PointCloud2')
     rows = []
     for message in recording.messages({chosen}):
@@ -62,10 +62,11 @@ def mcap_detections(path: Path, topic: str | None = None) -> np.ndarray:
         names = points.dtype.names or ()
         if 'x' not in names or 'y' not in names:
             raise TwinError(f'{path}, {chosen}: a cloud without x and y fields')
-        mass = (np.asarray(points['mass'], dtype=float) if 'mass' in names
-                else np.full(len(points), np.nan))
-        rows.append(np.column_stack([np.full(len(points), t), points['x'], points['y'], mass]))
-    table = np.concatenate(rows) if rows else np.zeros((0, 4))
+        mass, track = (np.asarray(points[name], dtype=float) if name in names
+                       else np.full(len(points), np.nan) for name in ('mass', 'track_id'))
+        rows.append(np.column_stack([np.full(len(points), t), points['x'], points['y'], mass,
+                                     track]))
+    table = np.concatenate(rows) if rows else np.zeros((0, 5))
     return table[np.argsort(table[:, 0], kind='stable')]
 
 

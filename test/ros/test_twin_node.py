@@ -23,7 +23,7 @@ from typing import Any
 from cone_feeder_sim.formats.cdr import CdrCodec
 from cone_feeder_sim.formats.mcap_reader import open_recording, parse_run_source
 from cone_feeder_sim.formats.messages import cloud_message, cone_state_message, header
-from cone_feeder_sim.formats.pointcloud import cloud_points, STATE_DTYPE
+from cone_feeder_sim.formats.pointcloud import cloud_points, NO_TRACK, STATE_DTYPE
 from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
@@ -121,6 +121,7 @@ def test_the_twin_follows_the_plant_and_forecasts(context: Any, tmp_path: Path) 
                          last['y'][:, None] - truth[None, :, 1]).min(axis=1)
         assert error.max() < 0.005
         assert (last['sigma_x'] > 0).all() and (last['sigma_x'] < 0.005).all()
+        assert (last['track_id'] == NO_TRACK).all()  # particle_states: id, not track_id
         assert plant.received['forecast'] and plant.received['parameters']
         forecast = plant.received['forecast'][-1]
         assert [d.size for d in forecast.layout.dim] == [3, MODEL.channels.count, 2]

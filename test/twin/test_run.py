@@ -101,6 +101,8 @@ def test_the_command_writes_the_forecasts(tmp_path: Path,
     assert masses.min() >= 0.0 and masses.max() <= 5 * MODEL.product.m + 1e-12
     pieces = read(out / 'pieces.csv')
     assert {r['piece'] for r in pieces} == {'0', '1', '2', '3', '4'}
+    # the track ids are the plant's ids, and the first frame bore the pieces in their order
+    assert all(r['track_id'] == r['piece'] for r in pieces)
     assert all(0.0 < float(r['probability']) <= 1.0 for r in pieces)
     parameters = read(out / 'parameters.csv')
     assert {r['key'] for r in parameters} == {'d', 'mu_C'} and len(parameters) == 30

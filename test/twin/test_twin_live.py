@@ -194,16 +194,24 @@ def test_a_hard_plant_is_followed_with_consistent_innovations() -> None:
 
 
 def test_swapped_or_absent_track_ids_give_the_same_twin() -> None:
-    # the association is by position alone: a camera's ids that swap cannot mislead it
+    # the association is by position alone: a camera's ids that swap cannot mislead it;
+    # each piece carries the track id of the detection last associated with it
     twins = []
+    frames = camera(1.0, 4)
     for ids in (True, False):
         follower = Follower(PARAMS, LiveSettings(twin=TwinSettings(members=4, seed=1)))
-        for t, omega, found, _ in camera(1.0, 4):
+        for t, omega, found, _ in frames:
             follower.cone_speed(t, omega)
             follower.frame(found if ids else replace(found, track_ids=None))
         twins.append(follower.twin)
+    truth = frames[-1][3]
     assert np.array_equal(twins[0].pieces()[1], twins[1].pieces()[1])
     assert twins[0].parameters() == twins[1].parameters()
+    pieces, mean, _ = twins[0].pieces()
+    nearest = np.argmin(np.linalg.norm(mean[:, None] - truth[None], axis=2), axis=1)
+    assert len(pieces) == len(truth)  # the plant's ids are 0..5, in the order of truth
+    assert [twins[0].tracks[int(i)] for i in pieces] == nearest.tolist()
+    assert twins[1].tracks == {}
 
 
 def test_forecasts_on_their_own_thread_leave_the_twin_as_forecasts_in_turn() -> None:
