@@ -24,7 +24,8 @@ publishes ``detections`` (PointCloud2 of :data:`~..formats.pointcloud.DETECTION_
 x, y, z, track_id; the frame's stamp and frame_id kept, the time it was taken) as a camera
 over the feeder gives them (:mod:`..twin.camera`): noise on x and y, pieces missed, false
 detections, track ids swapped, every frame ``delay`` plus up to ``jitter`` seconds late (so
-that frames arrive out of order, as the twin must take them). The settings are read at the
+that frames arrive out of order, as the twin must take them; wall-clock seconds, as a
+camera's network delays them, whatever sim_node's real_time_factor). The settings are read at the
 start; a frame that cannot be read is logged in one line and the camera goes on.
 """
 
@@ -85,7 +86,8 @@ class CameraNode(GuardedNode):
         self._held: list[tuple[float, int, dict[str, Any], int]] = []  # a heap, by time due
         self._order = itertools.count()
         self.taken = self.frames = 0  # the frames taken in and passed on
-        self.create_timer(RELEASE_PERIOD, self._release)
+        self._timer = self.create_timer(RELEASE_PERIOD, self._release)
+        self._timer.cancel()  # runs while frames are held
         s = self.settings
         self.get_logger().info(
             f'camera: {1e3 * s.sigma:g} mm of noise, {100 * s.miss:g} % missed, false '
@@ -115,6 +117,8 @@ class CameraNode(GuardedNode):
         ns = head['stamp']['sec'] * 1_000_000_000 + head['stamp']['nanosec']
         heapq.heappush(self._held, (time.monotonic() + late, next(self._order),
                                     cloud_message(head, found), ns))
+        if self._timer.is_canceled():
+            self._timer.reset()
 
     def _release(self) -> None:
         """Publish the held frames that are due, in the order they fall due."""
@@ -123,6 +127,8 @@ class CameraNode(GuardedNode):
             _, _, message, ns = heapq.heappop(self._held)
             self._outputs.publish(self._pub, message, ns)
             self.frames += 1
+        if not self._held:
+            self._timer.cancel()
 
 
 def main(args: list[str] | None = None) -> int:

@@ -23,8 +23,9 @@ following detections, births, deaths and exits, d and mu_C weighed per window) a
 the horizons, from the members), ``spec``, ``streams`` and ``run`` (the headless
 ``cone-feeder-sim twin`` over recorded CSV or MCAP streams), ``frames`` (the inputs'
 checks), ``live`` (``Follower``: the twin frame by frame, as ``twin_node`` runs it; late
-frames analysed again from a snapshot), ``messages`` (its estimates as standard messages)
-, ``particles`` (the parameters' particle step once per window) and ``camera`` (a camera
+frames analysed again from a snapshot), ``messages`` (its estimates as standard
+messages), ``particles`` (the parameters' particle step once per window) and ``camera`` (a
+camera
 standing in for the real one: noise, misses, false detections, swapped track ids; for
 ``camera_node``). No ROS here.
 """

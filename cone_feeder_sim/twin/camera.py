@@ -27,6 +27,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from ..formats.pointcloud import NO_TRACK
 from ..physics.params import check_integer, check_number, Limit
 
 __all__ = ['CAMERA_LIMITS', 'CameraSettings', 'FALSE_ID', 'observe']
@@ -43,8 +44,8 @@ CAMERA_LIMITS: dict[str, Limit] = {
     'seed': Limit(0, 2 ** 31 - 1, ''),
 }
 
-#: The track id of a false detection.
-FALSE_ID = 0xFFFFFFFF
+#: The track id of a false detection: none (a camera's false detection has no track).
+FALSE_ID = NO_TRACK
 
 
 @dataclass(frozen=True)

@@ -53,6 +53,7 @@ from .association import associate, GATE_CHI2
 from .enkf import analyse
 from .particles import resample_parameters
 from ..errors import Stopped
+from ..formats.pointcloud import NO_TRACK
 from ..physics.params import product_row, ProductParams
 from ..physics.rotation import rotate_z, RotationProfile
 from ..physics.simulation import (
@@ -346,8 +347,9 @@ class Twin:
 
         detections: (k, 2 or 3) world-frame positions (m; z is not used); masses: (k,) (kg;
         NaN: not given), or None: the product's mean mass; track_ids: (k,) the camera's
-        track ids, or None: not given. The association is by position alone; each piece
-        keeps the track id of the detection last associated with it (:attr:`tracks`).
+        track ids (NO_TRACK: not given), or None: none given. The association is by position
+        alone; each piece keeps the track id of the last detection with one associated with
+        it (:attr:`tracks`).
         """
         detections = np.asarray(detections, dtype=float).reshape(-1, detections.shape[-1])
         if not np.isfinite(detections).all():
@@ -368,7 +370,7 @@ class Twin:
             nis, observed = self._analyse(ids, match.pairs, detections[:, :2])
             for piece, seen in match.pairs:
                 i = int(ids[piece])
-                if track_ids is not None:
+                if track_ids is not None and track_ids[seen] != NO_TRACK:
                     self.tracks[i] = int(track_ids[seen])
                 self.last_seen[i] = t
                 self.hits[i] = min(self.hits.get(i, 0) + 1, self.settings.confirm)
@@ -383,8 +385,8 @@ class Twin:
             first = self.states[0].next_id
             self._birth(detections[born, :2], weights, t)
             if track_ids is not None:
-                self.tracks.update(zip(range(first, first + len(born)),
-                                       (int(track_ids[k]) for k in born)))
+                self.tracks.update((first + n, int(track_ids[k])) for n, k in enumerate(born)
+                                   if track_ids[k] != NO_TRACK)
         confirm, settings = self.settings.confirm, self.settings
         dead = [i for i in ids.tolist()
                 if t - self.last_seen.get(i, t) > (settings.death_after

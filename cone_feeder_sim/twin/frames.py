@@ -25,6 +25,7 @@ import math
 import numpy as np
 
 from ..errors import TwinError
+from ..formats.pointcloud import NO_TRACK
 
 __all__ = ['cone_speed', 'DetectionFrame', 'detection_frame', 'MAX_DETECTIONS',
            'MAX_FUTURE']
@@ -41,7 +42,7 @@ class DetectionFrame:
     One accepted frame: t (s); xy (k, 2) positions in the feeder frame (m).
 
     masses: (k,) kg (NaN: not given) or None (none given): the product's mean mass;
-    track_ids: (k,) or None (not given).
+    track_ids: (k,) uint32 (NO_TRACK: not given) or None (none given).
     """
 
     t: float
@@ -88,8 +89,27 @@ def detection_frame(t: float, points: np.ndarray, frame_id: str = 'feeder',
         elif not (np.isfinite(masses[given]).all() and (masses[given] > 0.0).all()):
             raise TwinError(f'frame at t = {t:.4f} s refused: a mass that is not a positive '
                             f'number')
-    track_ids = np.asarray(points['track_id']) if 'track_id' in names else None
+    track_ids = _track_ids(points['track_id']) if 'track_id' in names else None
     return DetectionFrame(t=float(t), xy=xy, masses=masses, track_ids=track_ids)
+
+
+def _track_ids(values: np.ndarray) -> np.ndarray | None:
+    """
+    Return a frame's track ids as uint32, NO_TRACK where a value is not one; None: none is.
+
+    A track id is an integer in [0, NO_TRACK); NaN (a CSV's empty cell), a fraction or a
+    value out of that range is no track id (the detection is taken, without one).
+    """
+    values = np.asarray(values)
+    if values.dtype.kind in 'ui':
+        wide = values.astype(np.int64)
+        valid = (wide >= 0) & (wide < NO_TRACK)
+    else:
+        wide = np.asarray(values, dtype=float)
+        valid = np.isfinite(wide) & (wide >= 0.0) & (wide < NO_TRACK) & (wide == np.floor(wide))
+    if not valid.any():
+        return None
+    return np.where(valid, np.where(valid, wide, 0).astype(np.int64), NO_TRACK).astype(np.uint32)
 
 
 def cone_speed(t: float, names: list[str], velocities: list[float],

@@ -55,7 +55,7 @@ def pieces_message(head: dict[str, Any], model: ModelParams, ids: np.ndarray,
     points['sigma_x'] = np.sqrt(covariance[:, 0, 0])
     points['sigma_y'] = np.sqrt(covariance[:, 1, 1])
     points['time_to_exit'] = np.nan
-    points['track_id'] = [(tracks or {}).get(int(i), NO_TRACK) & 0xFFFFFFFF for i in ids]
+    points['track_id'] = [(tracks or {}).get(int(i), NO_TRACK) for i in ids]
     if outlook is not None and len(outlook.ids):
         best, probability = outlook.most_likely()
         row = {int(i): k for k, i in enumerate(outlook.ids)}

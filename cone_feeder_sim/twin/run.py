@@ -48,7 +48,6 @@ from .forecast import forecast
 from .frames import detection_frame
 from .spec import TwinSpec
 from ..errors import TwinError
-from ..formats.pointcloud import NO_TRACK
 from ..physics.simulation import SimParams
 
 __all__ = ['run_twin', 'TwinSummary']
@@ -111,13 +110,10 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
                     log(f'cone speed refused: {exc}')
                 pending = next(cone, None)
             rows = spec.detections[a:b]
-            points = np.rec.fromarrays(rows[:, 1:5].T, names=('x', 'y', 'mass', 'track'))
+            points = np.rec.fromarrays(rows[:, 1:5].T, names=('x', 'y', 'mass', 'track_id'))
             try:
                 found = detection_frame(t, points)
-                known = np.isfinite(points['track'])
-                tracks = (np.where(known, points['track'], NO_TRACK).astype(np.int64)
-                          if known.any() else None)
-                frame = twin.update(t, found.xy, found.masses, tracks)
+                frame = twin.update(t, found.xy, found.masses, found.track_ids)
             except TwinError as exc:
                 refused += 1
                 log(str(exc))

@@ -18,7 +18,7 @@ A twin file is a YAML mapping::
 
     scenario: base.yaml        # the machine, the product prior (model.d, model.mu_C), the
                                # solver; its particles and rotation are not used
-    detections: detections.csv # columns t, x, y, z, track_id[, mass] (s, m, m, m, -, kg),
+    detections: detections.csv # columns t, x, y[, z, track_id, mass] (s, m, m, m, -, kg),
                                # or an MCAP file (a PointCloud2 topic: detections_topic,
                                # default /detections, else /particle_states)
     cone: cone.csv             # columns t, omega (s, rad/s), or an MCAP file (a JointState

@@ -22,9 +22,10 @@ taken from the module.
 
 from cone_feeder_sim.errors import MessageError
 from cone_feeder_sim.formats.pointcloud import (
-    cloud_points, EXIT_DTYPE, point_dtype, point_fields, STATE_DTYPE)
+    cloud_points, DETECTION_DTYPE, EXIT_DTYPE, point_dtype, point_fields, STATE_DTYPE,
+    TWIN_PIECE_DTYPE)
 import numpy as np
-from point_layouts import EXIT_FIELDS, FLOAT64, STATE_FIELDS
+from point_layouts import EXIT_FIELDS, FLOAT32, FLOAT64, STATE_FIELDS, UINT32
 import pytest
 
 
@@ -36,6 +37,15 @@ def test_layouts_are_the_documented_ones() -> None:
     assert list(point_fields(STATE_DTYPE)) == field_dicts(STATE_FIELDS)
     assert list(point_fields(EXIT_DTYPE)) == field_dicts(EXIT_FIELDS)
     assert (STATE_DTYPE.itemsize, EXIT_DTYPE.itemsize) == (32, 80)
+    # the twin's: twin/pieces (44 bytes) and camera_node's detections (16 bytes)
+    assert list(point_fields(TWIN_PIECE_DTYPE)) == field_dicts(
+        [('x', 0, FLOAT32), ('y', 4, FLOAT32), ('z', 8, FLOAT32), ('id', 12, UINT32),
+         ('mass', 16, FLOAT32), ('sigma_x', 20, FLOAT32), ('sigma_y', 24, FLOAT32),
+         ('channel', 28, UINT32), ('probability', 32, FLOAT32), ('time_to_exit', 36, FLOAT32),
+         ('track_id', 40, UINT32)])
+    assert list(point_fields(DETECTION_DTYPE)) == field_dicts(
+        [('x', 0, FLOAT32), ('y', 4, FLOAT32), ('z', 8, FLOAT32), ('track_id', 12, UINT32)])
+    assert (TWIN_PIECE_DTYPE.itemsize, DETECTION_DTYPE.itemsize) == (44, 16)
 
 
 def test_point_dtype_reads_the_fields_back() -> None:

@@ -29,10 +29,12 @@ from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
 CODEC = CdrCodec()
+#: The camera's publisher is best effort; a deep queue keeps every frame of a stalled test.
+SEEN_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
 TRUTH = np.array([[0.1, 0.02, 0.01], [-0.08, 0.09, 0.012], [0.03, -0.13, 0.011]])
 
 
@@ -46,7 +48,7 @@ class Plant:
         self.node.create_subscription(
             PointCloud2, 'detections', lambda data: self.received.append(
                 (time.monotonic(), CODEC.decode('sensor_msgs/msg/PointCloud2', data))),
-            qos_profile_sensor_data, raw=True)
+            SEEN_QOS, raw=True)
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
         self.executor.add_node(camera)

@@ -19,6 +19,9 @@ from pathlib import Path
 from cone_feeder_sim.cli import main
 from cone_feeder_sim.errors import TwinError
 from cone_feeder_sim.formats.mcap_reader import open_recording
+from cone_feeder_sim.formats.mcap_writer import McapRecorder
+from cone_feeder_sim.formats.messages import cloud_message, cone_state_message, header
+from cone_feeder_sim.formats.pointcloud import DETECTION_DTYPE, NO_TRACK
 from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
@@ -164,3 +167,29 @@ def test_the_streams_are_read_from_a_recording(tmp_path: Path) -> None:
     with pytest.raises(TwinError, match='no sensor_msgs/msg/PointCloud2 topic '
                                         '/exit_events_nowhere'):
         load_twin(tmp_path / 'twin.yaml')
+
+
+def test_a_camera_s_track_ids_are_read_from_a_recording(tmp_path: Path) -> None:
+    # camera_node's detections recorded: their track_id field becomes the fifth column
+    points = np.zeros(3, dtype=DETECTION_DTYPE)
+    points['x'], points['y'] = [0.1, -0.08, 0.03], [0.02, 0.09, -0.13]
+    points['track_id'] = [40, NO_TRACK, 42]
+    with McapRecorder(tmp_path / 'camera.mcap') as recorder:
+        for k in range(1, 7):  # a forecast at the first frame and at the fifth
+            ns = round(k / 30.0 * 1e9)
+            recorder.write('/detections', 'sensor_msgs/msg/PointCloud2',
+                           cloud_message(header(k / 30.0, 'feeder'), points), ns)
+            recorder.write('/cone_state', 'sensor_msgs/msg/JointState',
+                           cone_state_message(header(k / 30.0, 'feeder'), 0.0, 0.0), ns)
+    (tmp_path / 'scenario.yaml').write_text(yaml.safe_dump(
+        {'duration': 1.0, 'rotation': ROTATION,
+         'particles': [{'position': [0.1, 0.0, 0.0], 'on_surface': True}]}))
+    (tmp_path / 'twin.yaml').write_text(yaml.safe_dump(
+        {'scenario': 'scenario.yaml', 'detections': 'camera.mcap', 'cone': 'camera.mcap'}))
+    spec = load_twin(tmp_path / 'twin.yaml')
+    assert spec.detections[:, 4].tolist() == [40, NO_TRACK, 42] * 6
+    assert np.isnan(spec.detections[:, 3]).all()  # no mass field: not given
+    run_twin(spec, tmp_path / 'out')
+    pieces = read(tmp_path / 'out' / 'pieces.csv')
+    found = [(r['piece'], r['track_id']) for r in pieces]
+    assert found == [('0', '40'), ('1', ''), ('2', '42')]

@@ -1,0 +1,51 @@
+# Copyright 2026 The cone_feeder_sim Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Tests of cone_feeder_sim.twin.frames: a frame's track ids, as a camera or a CSV gives them."""
+
+from cone_feeder_sim.formats.pointcloud import DETECTION_DTYPE, NO_TRACK
+from cone_feeder_sim.twin.estimator import Twin, TwinSettings
+from cone_feeder_sim.twin.frames import detection_frame
+import numpy as np
+from test_twin_live import PARAMS
+
+
+def frame_of(track_ids: list, dtype: str) -> np.ndarray:
+    points = np.zeros(len(track_ids), dtype=[('x', '<f8'), ('y', '<f8'), ('track_id', dtype)])
+    points['x'] = 0.05 * np.arange(len(track_ids)) + 0.02
+    points['track_id'] = track_ids
+    return points
+
+
+def test_what_is_not_a_track_id_is_none_and_the_detection_is_kept() -> None:
+    # a CSV's empty cell (NaN), a fraction, a negative, one beyond uint32, infinity
+    found = detection_frame(0.1, frame_of([7, np.nan, 2.5, -1, 2.0 ** 40, np.inf, 0], '<f8'))
+    assert found.track_ids.dtype == np.uint32 and len(found.xy) == 7
+    assert found.track_ids.tolist() == [7] + [NO_TRACK] * 5 + [0]
+    assert detection_frame(0.1, frame_of([np.nan, np.nan], '<f8')).track_ids is None
+    points = np.zeros(2, dtype=DETECTION_DTYPE)
+    points['track_id'] = [3, NO_TRACK]  # camera_node's: a false detection has none
+    assert detection_frame(0.1, points).track_ids.tolist() == [3, NO_TRACK]
+
+
+def test_a_piece_keeps_its_last_track_id_and_none_is_not_one() -> None:
+    twin = Twin(PARAMS, TwinSettings(members=4, sigma=0.001, confirm=1))
+    first = detection_frame(1 / 30, frame_of([11, np.nan, 13], '<f8'))
+    twin.update(first.t, first.xy, None, first.track_ids)
+    assert twin.tracks == {0: 11, 2: 13}  # born with theirs; the second has none yet
+    again = detection_frame(2 / 30, frame_of([np.nan, 12, 14], '<f8'))
+    twin.update(again.t, again.xy, None, again.track_ids)
+    assert twin.tracks == {0: 11, 1: 12, 2: 14}  # none keeps the last; a new one replaces it
+    twin._drop([1])
+    assert twin.tracks == {0: 11, 2: 14}
