@@ -33,7 +33,10 @@ from workers import SHARED_ENV, worker_domains
 
 def pytest_configure(config: pytest.Config) -> None:
     """Give this process (an xdist worker) a ROS domain of its own, and one numba thread."""
-    del config
+    if getattr(config.option, 'loadscopereorder', False):
+        # xdist's loadfile hands out the files with the most tests first unless told not to
+        # (--no-loadscope-reorder): keep the collection's order, the slow tests' files first
+        config.option.loadscopereorder = False
     os.environ['ROS_DOMAIN_ID'] = str(worker_domains()[0])
     # Idle OpenMP threads (numba's threading layer here) sleep instead of spinning, which
     # would take the cores the other workers need: set before numba starts its threads, for
