@@ -59,10 +59,8 @@ def main() -> None:
         wall += time.perf_counter() - start
         if k % 150:
             continue
-        held = [i for i in twin.states[0].ids.tolist()
-                if all(i in s.ids for s in twin.states)]  # every member's pieces
-        mean = np.mean([s.y[[s.ids.tolist().index(i) for i in held]] for s in twin.states],
-                       axis=0)
+        held = twin._common()  # every member's pieces, and each member's rows of them
+        mean = np.mean([s.y[twin._rows(s, held)] for s in twin.states], axis=0)
         _, nearest = cKDTree(mean[:, :2]).query(plant.y[:, :2])
         error = mean[nearest] - plant.y
         found = twin.parameters()

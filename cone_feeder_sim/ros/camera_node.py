@@ -25,8 +25,8 @@ x, y, z, track_id; the frame's stamp and frame_id kept, the time it was taken) a
 over the feeder gives them (:mod:`..twin.camera`): noise on x and y, pieces missed, false
 detections, track ids swapped, every frame ``delay`` plus up to ``jitter`` seconds late (so
 that frames arrive out of order, as the twin must take them; wall-clock seconds, as a
-camera's network delays them, whatever sim_node's real_time_factor). The settings are read at the
-start; a frame that cannot be read is logged in one line and the camera goes on.
+camera's network delays them, whatever sim_node's real_time_factor). The settings are read
+at the start; a frame that cannot be read is logged in one line and the camera goes on.
 """
 
 import heapq

@@ -25,7 +25,6 @@ the horizons, from the members), ``spec``, ``streams`` and ``run`` (the headless
 checks), ``live`` (``Follower``: the twin frame by frame, as ``twin_node`` runs it; late
 frames analysed again from a snapshot), ``messages`` (its estimates as standard
 messages), ``particles`` (the parameters' particle step once per window) and ``camera`` (a
-camera
-standing in for the real one: noise, misses, false detections, swapped track ids; for
-``camera_node``). No ROS here.
+camera standing in for the real one: noise, misses, false detections, swapped track ids;
+for ``camera_node``). No ROS here.
 """
