@@ -25,15 +25,17 @@ detections, for the caller to weigh.
 """
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.stats import chi2
 
 __all__ = ['associate', 'Association', 'GATE_CHI2']
 
-#: The gate: the 0.999 quantile of chi-square with 2 degrees of freedom (13.8).
-GATE_CHI2 = float(chi2.ppf(0.999, 2))
+#: The gate: the 0.999 quantile of chi-square with 2 degrees of freedom (13.8). That
+#: distribution is the exponential of mean 2, so the quantile is -2 ln(1 - 0.999), in closed
+#: form (scipy.stats would add 0.4 s to twin_node's start-up).
+GATE_CHI2 = -2.0 * math.log(1.0 - 0.999)
 #: The cost of a gated-out pair in the assignment (never chosen over a real one).
 _FORBIDDEN = 1.0e12
 

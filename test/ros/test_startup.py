@@ -56,3 +56,32 @@ def test_misspelt_parameters_are_named_with_the_closest_valid_name() -> None:
     assert "'feed.rat'" in warnings[0] and "did you mean 'feed.rate'" in warnings[0]
     assert "did you mean 'real_time_factor'" in warnings[1]
     assert "'zzz'" in warnings[2] and 'did you mean' not in warnings[2]
+
+
+#: What a start-up must not import where the run does not ask for it (each 0.3-0.4 s of
+#: every start): scipy's optimisers (cohesion's root finding), statistics and KD-tree (the
+#: live view's touching pairs).
+HEAVY = ('scipy.optimize', 'scipy.stats', 'scipy.spatial')
+#: Imports the modules named after the first argument in turn; prints after each module's name
+#: the modules of the first argument (comma-separated) that are loaded by then.
+LOADS = """
+import importlib, sys
+heavy = set(sys.argv[1].split(','))
+for module in sys.argv[2:]:
+    importlib.import_module(module)
+    print(module, *sorted(name for name in sys.modules if name in heavy))
+"""
+
+
+def test_the_nodes_and_the_command_start_without_the_heavy_parts_of_scipy() -> None:
+    # one process, each module in turn: what a module adds is printed after its name
+    modules = (*MODULES, 'cone_feeder_sim.ros.camera_node', 'cone_feeder_sim.cli',
+               'cone_feeder_sim.ros.twin_node')
+    done = subprocess.run([sys.executable, '-c', LOADS, ','.join(HEAVY), *modules],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    loaded = dict(line.partition(' ')[::2] for line in done.stdout.splitlines())
+    assert all(loaded[module] == '' for module in modules[:-1]), loaded
+    # the twin assigns detections with scipy's optimiser (which loads the KD-tree's module),
+    # and needs no statistics
+    assert loaded['cone_feeder_sim.ros.twin_node'] == 'scipy.optimize scipy.spatial', loaded

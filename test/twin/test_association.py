@@ -17,6 +17,8 @@ from itertools import permutations
 
 from cone_feeder_sim.twin.association import associate, GATE_CHI2
 import numpy as np
+import pytest
+from scipy.stats import chi2
 
 SIGMA = 0.002  # m
 
@@ -72,8 +74,9 @@ def test_random_cases_match_brute_force() -> None:
 
 
 def test_the_gate_is_the_chi_square_quantile() -> None:
-    # a detection just inside the gate is assigned, one just outside is not
-    assert 13.8 < GATE_CHI2 < 13.9
+    # the closed form is scipy's quantile; a detection just inside the gate is assigned,
+    # one just outside is not
+    assert GATE_CHI2 == pytest.approx(chi2.ppf(0.999, 2), rel=1e-14)
     pieces = np.array([[0.0, 0.0]])
     for scale, assigned in ((0.999, True), (1.001, False)):
         detection = np.array([[np.sqrt(scale * GATE_CHI2) * SIGMA, 0.0]])

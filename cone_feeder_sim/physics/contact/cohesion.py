@@ -27,7 +27,6 @@ import functools
 import math
 
 import numba
-from scipy.optimize import brentq, minimize_scalar
 
 __all__ = ['contact_area', 'density_for_pull_off', 'largest_pull']
 
@@ -57,6 +56,7 @@ def largest_pull(density: float, y_star: float, r_i: float, r_j: float) -> float
     """Return the largest static pull (N) of two pieces (radii r_i, r_j m, modulus Y* Pa)."""
     if density <= 0.0:
         return 0.0
+    from scipy.optimize import minimize_scalar  # here: 0.2 s of every start-up otherwise
     best = minimize_scalar(lambda d: -_net_pull(d, density, y_star, r_i, r_j),
                            bounds=(0.0, min(r_i, r_j)), method='bounded',
                            options={'xatol': 1e-12 * min(r_i, r_j)})
@@ -90,5 +90,6 @@ def density_for_pull_off(pull_off: float, y_star: float, r_i: float, r_j: float)
         hi *= 4.0
     else:  # degenerate sizes (far below a millimetre): no density reaches the pull
         return guess if math.isfinite(guess) else 0.0
+    from scipy.optimize import brentq
     return brentq(lambda k: largest_pull(k, y_star, r_i, r_j) - pull_off, lo, hi,
                   xtol=1e-14 * guess, rtol=1e-12)
