@@ -61,7 +61,7 @@ from ..physics.simulation import (
     StepResult, world_from_cone)
 from ..physics.stop import StopFlag
 
-__all__ = ['Exit', 'Frame', 'TUNING', 'Twin', 'TwinSettings']
+__all__ = ['Exit', 'Frame', 'STILL', 'TUNING', 'Twin', 'TwinSettings']
 
 #: The ranges the members' parameters are held in: log d (d in N*s/m) and mu_C.
 LOG_D_RANGE = (math.log(1.0), math.log(1.0e4))
@@ -74,6 +74,10 @@ MU_C_RANGE = (0.05, 5.0)
 #: piece sticks: largest height error 555 m, P 59 N, d 39 +- 1 for a truth of 225; now
 #: 0.2 mm, 0.01 N, d 239 +- 70).
 ANALYSED = np.array([0, 1, 3, 4, 6, 7])
+#: A piece moving slower than this relative to the cone (m/s) rides with it. One that rides
+#: in every member has its position alone analysed (:meth:`Twin._analyse`); a forecast takes
+#: riders out after its probe (:mod:`.forecast`).
+STILL = 1.0e-3
 
 
 @dataclass(frozen=True)
@@ -457,7 +461,11 @@ class Twin:
         Only :data:`ANALYSED` of each piece's state are updated; each piece keeps its height
         above the cone's surface where its x, y moved, and the change of its velocity and
         filter force in x, y gets the z part that keeps it along the surface (as
-        :mod:`..fit.shooting` places pieces).
+        :mod:`..fit.shooting` places pieces). A piece that rides with the cone in every
+        member (:data:`STILL`) keeps its velocity and filter force: where it sticks, their
+        sampled correlations with its position are noise, and updating them set off the
+        friction law's stiff transients in the next prediction (doc/twin.md, "A piece that
+        rides with the cone").
         """
         n, per = len(ids), len(ANALYSED)
         width = per * n
@@ -478,11 +486,14 @@ class Twin:
             self.log_d = np.clip(result.ensemble[:, width], *LOG_D_RANGE)
             self.mu_c = np.clip(result.ensemble[:, width + 1], *MU_C_RANGE)
         slope = self.params.model.h / self.params.model.r
+        riding = np.all([np.linalg.norm(s.y[r, 3:6], axis=1) < STILL
+                         for s, r in zip(self.states, rows)], axis=0)
         states = []
         for s, r, row in zip(self.states, rows, result.ensemble):
             y = s.y.copy()
             before = y[r].copy()
             y[r[:, None], ANALYSED] = row[:width].reshape(n, per)
+            y[r[riding], 3:9] = before[riding, 3:9]
             change = y[r] - before
             x, rho = y[r, 0:2], np.maximum(np.hypot(y[r, 0], y[r, 1]), 1e-9)
             # along the surface: z follows rho, w_z and P_z their x, y parts' radial change

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .estimator import Twin
+from .estimator import STILL, Twin
 from ..physics.rotation import RotationProfile
 from ..physics.simulation import ExitEvents, remove_particles, SimState
 
@@ -49,9 +49,8 @@ __all__ = ['DRIFT', 'Forecast', 'forecast', 'PROBE', 'STILL']
 
 #: The first part of a forecast every piece runs through (s).
 PROBE = 0.1
-#: A piece riding with the cone moves slower than this relative to it (m/s) ...
-STILL = 1.0e-3
-#: ... and less than this over the probe, in the cone's axes (m).
+#: A piece riding with the cone moves slower than :data:`STILL` relative to it (m/s, the
+#: estimator's) at both ends of the probe and less than this over it, in the cone's axes (m).
 DRIFT = 5.0e-4
 
 

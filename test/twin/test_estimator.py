@@ -19,11 +19,13 @@ reverses, seen at 30 frames/s with 1 mm of noise. The twin starts from nothing a
 the detections and the cone speed only.
 """
 
+from dataclasses import replace
+
 from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
-from cone_feeder_sim.twin.estimator import Frame, Twin, TwinSettings
+from cone_feeder_sim.twin.estimator import Frame, STILL, Twin, TwinSettings
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -112,6 +114,32 @@ def test_a_small_ensemble_follows_many_pieces_consistently() -> None:
             associated, detected = associated + frame.associated, detected + plant.count
     assert plant.count == 28 and associated >= 0.995 * detected  # measured 1,649 of 1,652
     assert chi2.ppf(5e-4, observed) < nis < chi2.ppf(1.0 - 5e-4, observed)
+
+
+def test_an_analysis_moves_a_piece_riding_with_the_cone_by_its_position_alone() -> None:
+    # three pieces at rest on a cone at rest ride with it in every member; the first is
+    # then made to slide in one member: it alone gets its velocity and filter force analysed
+    twin = Twin(PARAMS, TwinSettings(members=8, sigma=SIGMA, seed=5))
+    places = np.array(PLACES[:3])
+    rng = np.random.default_rng(6)
+    for k in range(1, 5):
+        twin.cone_speed(k / 30.0, 0.0)
+        twin.update(k / 30.0, places + rng.normal(0.0, SIGMA, places.shape))
+    t = 5 / 30.0
+    twin.cone_speed(t, 0.0)
+    twin.predict(t)
+    ids = twin.pieces()[0]
+    assert len(ids) == 3 and all(np.all(np.linalg.norm(s.y[:, 3:6], axis=1) < STILL)
+                                 for s in twin.states)
+    sliding = twin.states[0].y.copy()
+    sliding[0, 3] = 10.0 * STILL  # m/s, relative to the cone
+    twin.states[0] = replace(twin.states[0], y=sliding)
+    before = [s.y.copy() for s in twin.states]
+    twin.update(t, places + 0.002)  # 2 mm off in x and y: every position moves
+    for old, new in zip(before, twin.states):
+        assert np.all(new.y[:, 0:2] != old[:, 0:2])
+        np.testing.assert_array_equal(new.y[1:, 3:9], old[1:, 3:9])
+    assert any(np.any(new.y[0, 3:9] != old[0, 3:9]) for old, new in zip(before, twin.states))
 
 
 def test_a_false_detection_is_never_shown_and_dies_soon() -> None:
