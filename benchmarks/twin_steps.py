@@ -16,7 +16,8 @@
 Profile: where the headless twin's integration steps go.
 
 Runs twin_headless.py's stream (30 pieces, the cone reversing at ±3 rad/s, every piece
-sticking) through ``cone-feeder-sim twin`` with the twin file's defaults and counts the
+sticking) through the headless twin (``run_twin``, what ``cone-feeder-sim twin`` runs) with
+the twin file's defaults and counts the
 steps of every call of ``Twin.advance``: the frames' predictions (the members and the
 window's smoother members, one frame each) and the forecasts' probes (:data:`PROBE` s) and
 their rest. Prints, per kind, the accepted and rejected steps per piece and call, and for
@@ -62,7 +63,7 @@ def main() -> None:
         write_stream(folder, args.seconds)
         run_twin(stream_twin(folder), folder / 'out')
     profile = reversing_profile(args.seconds)
-    table = np.array(calls)
+    table = np.array(calls).reshape(-1, 5)
     frame = np.isclose(table[:, 1], 1.0 / 30.0, rtol=0.0, atol=1e-5)  # stamps to the µs
     probe = np.isclose(table[:, 1], PROBE, rtol=0.0, atol=1e-5)
     ramp = np.array([profile.segments(t, t + 1e-6)[2][0] != 0.0 for t in table[:, 0]])
@@ -74,8 +75,8 @@ def main() -> None:
         if not pieces:
             print(f'{name}: no piece')
             continue
-        print(f'{name}: {np.count_nonzero(part[:, 2])} calls, {pieces:.0f} pieces; per piece '
-              f'and call {part[:, 3].sum() / pieces:.1f} accepted, '
+        print(f'{name}: {np.count_nonzero(part[:, 2])} calls with pieces, {pieces:.0f} '
+              f'pieces; per piece and call {part[:, 3].sum() / pieces:.1f} accepted, '
               f'{part[:, 4].sum() / pieces:.1f} rejected steps')
     print(calibration_line(), flush=True)
 

@@ -24,9 +24,10 @@ detections the estimator
 1. associates the detections with its pieces (:mod:`.association`: the ensemble's mean and
    spread of each piece's position plus the detection noise, a chi-square gate, the
    optimal assignment);
-2. analyses the ensemble (:mod:`.enkf`) against the assigned detections: every piece's
-   whole state (position, velocity, filter force, in cone axes) and log d and mu_C, through
-   the covariances the ensemble carries, so that the parameters are re-identified on line;
+2. analyses the ensemble (:mod:`.enkf`) against the assigned detections: each piece's
+   position, velocity and filter force in x, y (cone axes, :data:`ANALYSED`; a piece riding
+   with the cone in every member: its position alone) and log d and mu_C, through the
+   covariances the ensemble carries, so that the parameters are re-identified on line;
 3. adds a piece for each detection left over (a birth: resting on the cone where it was
    seen, spread by the detection noise over the members) and drops pieces not seen for
    ``death_after`` s, and one of two pieces within the gate of each other that were not

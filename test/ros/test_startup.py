@@ -13,10 +13,12 @@
 # limitations under the License.
 
 """
-Start-up problems of the nodes are one line each, never a traceback.
+Start-up problems are one line each, never a traceback; a start imports what it uses.
 
 An unparsable parameter file ends the process with status 1 and one FATAL line; a misspelt
-parameter name is a warning naming the closest valid name (the node starts).
+parameter name is a warning naming the closest valid name (the node starts). Without
+contact between pieces, no node nor the command loads scipy's optimisers, statistics or
+KD-tree.
 """
 
 from pathlib import Path
@@ -58,30 +60,35 @@ def test_misspelt_parameters_are_named_with_the_closest_valid_name() -> None:
     assert "'zzz'" in warnings[2] and 'did you mean' not in warnings[2]
 
 
-#: What a start-up must not import where the run does not ask for it (each 0.3-0.4 s of
-#: every start): scipy's optimisers (cohesion's root finding), statistics and KD-tree (the
-#: live view's touching pairs).
+#: What a start without contact between pieces must not import where the run does not ask for
+#: it (together about 0.3 s of every such start): scipy's optimisers (cohesion's root finding,
+#: which imports scipy.spatial itself), statistics (the twin's gate) and KD-tree (the live
+#: view's touching pairs).
 HEAVY = ('scipy.optimize', 'scipy.stats', 'scipy.spatial')
-#: Imports the modules named after the first argument in turn; prints after each module's name
-#: the modules of the first argument (comma-separated) that are loaded by then.
+#: Takes the steps after the first argument in turn (a module to import, or SimParams: the
+#: parameters of a run without contact built); prints after each step's name the modules of
+#: the first argument (comma-separated) that are loaded by then.
 LOADS = """
 import importlib, sys
 heavy = set(sys.argv[1].split(','))
-for module in sys.argv[2:]:
-    importlib.import_module(module)
-    print(module, *sorted(name for name in sys.modules if name in heavy))
+for step in sys.argv[2:]:
+    if step == 'SimParams':
+        from cone_feeder_sim.physics.simulation import SimParams
+        SimParams()
+    else:
+        importlib.import_module(step)
+    print(step, *sorted(name for name in sys.modules if name in heavy))
 """
 
 
 def test_the_nodes_and_the_command_start_without_the_heavy_parts_of_scipy() -> None:
-    # one process, each module in turn: what a module adds is printed after its name
-    modules = (*MODULES, 'cone_feeder_sim.ros.camera_node', 'cone_feeder_sim.cli',
-               'cone_feeder_sim.ros.twin_node')
-    done = subprocess.run([sys.executable, '-c', LOADS, ','.join(HEAVY), *modules],
+    # one process, each step in turn: all it has loaded is printed after each step's name
+    steps = (*MODULES, 'cone_feeder_sim.ros.camera_node', 'cone_feeder_sim.cli', 'SimParams')
+    twin = 'cone_feeder_sim.ros.twin_node'
+    done = subprocess.run([sys.executable, '-c', LOADS, ','.join(HEAVY), *steps, twin],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     loaded = dict(line.partition(' ')[::2] for line in done.stdout.splitlines())
-    assert all(loaded[module] == '' for module in modules[:-1]), loaded
-    # the twin assigns detections with scipy's optimiser (which loads the KD-tree's module),
-    # and needs no statistics
-    assert loaded['cone_feeder_sim.ros.twin_node'] == 'scipy.optimize scipy.spatial', loaded
+    assert all(loaded[step] == '' for step in steps), loaded
+    # the twin assigns detections with scipy's optimiser, and needs no statistics
+    assert 'scipy.optimize' in loaded[twin] and 'scipy.stats' not in loaded[twin], loaded

@@ -60,13 +60,15 @@ def interaction_row(model: ModelParams) -> np.ndarray:
     Return the law's row (INTERACTION_WIDTH,): beta, mu and k (N/m^2), read-only.
 
     k is sized so that two pieces of the model's default product pull each other apart with
-    at most ``pull_off`` (:func:`.cohesion.density_for_pull_off`).
+    at most ``pull_off`` (:func:`.cohesion.density_for_pull_off`), and is 0 where the law is
+    off (no pair is evaluated then; sizing it loads scipy's root finder).
     """
     inter, product = model.interactions, model.product
     default = product_row(product)
     y_star = pair_constants(default, default)[2]
-    row = np.array([damping_ratio(inter.restitution), inter.friction,
-                    density_for_pull_off(inter.pull_off, y_star, product.s0, product.s0)])
+    cohesion = (density_for_pull_off(inter.pull_off, y_star, product.s0, product.s0)
+                if inter.enabled else 0.0)
+    row = np.array([damping_ratio(inter.restitution), inter.friction, cohesion])
     row.setflags(write=False)
     return row
 
