@@ -62,7 +62,7 @@ from ..formats.runlog import run_metadata
 from ..formats.topics import TWIN_TOPICS
 from ..physics.params import Limit, SolverParams
 from ..physics.simulation import SimParams
-from ..twin.estimator import TUNING, TwinSettings
+from ..twin.estimator import parameter_note, TUNING, TwinSettings
 from ..twin.frames import cone_speed, detection_frame, MAX_FUTURE
 from ..twin.live import Follower, LiveSettings
 from ..twin.messages import channel_forecast_message, parameters_message, pieces_message
@@ -185,6 +185,8 @@ class TwinNode(GuardedNode):
         self.get_logger().info(
             f'following with {settings.members} members, forecasts every '
             f"{values['forecast_period']:g} s over {', '.join(f'{h:g}' for h in horizons)} s")
+        if note := parameter_note(settings.members):
+            self.get_logger().info(note)
 
     def _watch(self) -> None:
         """Stop the twin's computation once the context is shut down (SIGINT, SIGTERM)."""

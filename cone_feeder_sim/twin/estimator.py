@@ -62,7 +62,8 @@ from ..physics.simulation import (
     StepResult, world_from_cone)
 from ..physics.stop import StopFlag
 
-__all__ = ['Exit', 'Frame', 'STILL', 'TUNING', 'Twin', 'TwinSettings']
+__all__ = ['CALIBRATED_MEMBERS', 'Exit', 'Frame', 'parameter_note', 'STILL', 'TUNING', 'Twin',
+           'TwinSettings']
 
 #: The ranges the members' parameters are held in: log d (d in N*s/m) and mu_C.
 LOG_D_RANGE = (math.log(1.0), math.log(1.0e4))
@@ -75,6 +76,10 @@ MU_C_RANGE = (0.05, 5.0)
 #: piece sticks: largest height error 555 m, P 59 N, d 39 +- 1 for a truth of 225; now
 #: 0.2 mm, 0.01 N, d 239 +- 70).
 ANALYSED = np.array([0, 1, 3, 4, 6, 7])
+#: The fewest members whose d and mu_C came within 3 of their spreads of the truth in all 16
+#: cases of benchmarks/twin_identify.py (doc/twin.md): with 8 members 5 were beyond, with 4
+#: members 7 (one 22.6 spreads off). Fewer members' spread is over-confident.
+CALIBRATED_MEMBERS = 32
 #: A piece moving slower than this relative to the cone (m/s) rides with it. One that rides
 #: in every member has its position alone analysed (:meth:`Twin._analyse`); a forecast takes
 #: riders out after its probe (:mod:`.forecast`).
@@ -176,6 +181,15 @@ def loosened(params: SimParams, factor: float) -> SimParams:
     return replace(params, solver=replace(
         solver, rtol=solver.rtol * factor, atol_position=solver.atol_position * factor,
         atol_velocity=solver.atol_velocity * factor, atol_force=solver.atol_force * factor))
+
+
+def parameter_note(members: int) -> str:
+    """Return what a run of this many members should say of its d and mu_C ('' if nothing)."""
+    if members >= CALIBRATED_MEMBERS:
+        return ''
+    return (f'with {members} members the spread of d and mu_C is over-confident: their '
+            f'estimates are a trend (a spread that holds from {CALIBRATED_MEMBERS} members, '
+            'doc/twin.md)')
 
 
 #: The members' parameters at one time: log d (M,) and mu_C (M,).
