@@ -76,9 +76,9 @@ MU_C_RANGE = (0.05, 5.0)
 #: piece sticks: largest height error 555 m, P 59 N, d 39 +- 1 for a truth of 225; now
 #: 0.2 mm, 0.01 N, d 239 +- 70).
 ANALYSED = np.array([0, 1, 3, 4, 6, 7])
-#: The fewest members whose d and mu_C came within 3 of their spreads of the truth in all 16
-#: cases of benchmarks/twin_identify.py (doc/twin.md): with 8 members 5 were beyond, with 4
-#: members 7 (one 22.6 spreads off). Fewer members' spread is over-confident.
+#: The fewest members of those measured whose d and mu_C came within 3 spreads of the truth
+#: in all 16 cases of benchmarks/twin_identify.py (doc/twin.md): with 8 members 5 cases were
+#: beyond, with 4 members 7 (one 22.6 spreads off). Fewer members' spread is over-confident.
 CALIBRATED_MEMBERS = 32
 #: A piece moving slower than this relative to the cone (m/s) rides with it. One that rides
 #: in every member has its position alone analysed (:meth:`Twin._analyse`); a forecast takes
