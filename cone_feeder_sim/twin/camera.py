@@ -30,7 +30,7 @@ import numpy as np
 from ..formats.pointcloud import NO_TRACK
 from ..physics.params import check_integer, check_number, Limit
 
-__all__ = ['CAMERA_LIMITS', 'CameraSettings', 'FALSE_ID', 'observe']
+__all__ = ['CAMERA_LIMITS', 'CameraSettings', 'observe']
 
 #: The ranges of :class:`CameraSettings` (camera_node's parameters of the same names).
 CAMERA_LIMITS: dict[str, Limit] = {
@@ -43,9 +43,6 @@ CAMERA_LIMITS: dict[str, Limit] = {
     'jitter': Limit(0.0, 10.0, 's'),
     'seed': Limit(0, 2 ** 31 - 1, ''),
 }
-
-#: The track id of a false detection: none (a camera's false detection has no track).
-FALSE_ID = NO_TRACK
 
 
 @dataclass(frozen=True)
@@ -86,8 +83,8 @@ def observe(settings: CameraSettings, rng: np.random.Generator, positions: np.nd
 
     positions: (n, d) the true positions (m; x and y first, d >= 2: noise is added to x and
     y only, a false detection's other coordinates are 0); ids (n,): the pieces' ids
-    (uint32 track ids; a false detection's is :data:`FALSE_ID`). The detections come in a
-    random order.
+    (uint32 track ids; a false detection has none: :data:`~..formats.pointcloud.NO_TRACK`).
+    The detections come in a random order.
     """
     positions = np.asarray(positions, dtype=float)
     kept = rng.random(len(positions)) > settings.miss
@@ -100,7 +97,7 @@ def observe(settings: CameraSettings, rng: np.random.Generator, positions: np.nd
         false = np.zeros((1, positions.shape[1]))
         false[0, :2] = r * np.cos(a), r * np.sin(a)
         seen = np.vstack([seen, false])
-        track = np.append(track, np.uint32(FALSE_ID))
+        track = np.append(track, np.uint32(NO_TRACK))
     order = rng.permutation(len(seen))
     seen, track = seen[order], track[order]
     if settings.swap > 0.0 and len(track) > 1 and rng.random() < settings.swap:

@@ -109,7 +109,9 @@ def _track_ids(values: np.ndarray) -> np.ndarray | None:
         valid = np.isfinite(wide) & (wide >= 0.0) & (wide < NO_TRACK) & (wide == np.floor(wide))
     if not valid.any():
         return None
-    return np.where(valid, np.where(valid, wide, 0).astype(np.int64), NO_TRACK).astype(np.uint32)
+    ids = np.full(len(wide), NO_TRACK, dtype=np.uint32)
+    ids[valid] = wide[valid]
+    return ids
 
 
 def cone_speed(t: float, names: list[str], velocities: list[float],

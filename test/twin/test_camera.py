@@ -15,7 +15,8 @@
 """Tests of cone_feeder_sim.twin.camera: the camera's errors at the rates it is set to."""
 
 from cone_feeder_sim.errors import ParameterError
-from cone_feeder_sim.twin.camera import CameraSettings, FALSE_ID, observe
+from cone_feeder_sim.formats.pointcloud import NO_TRACK
+from cone_feeder_sim.twin.camera import CameraSettings, observe
 import numpy as np
 import pytest
 from scipy.stats import binom, chi2
@@ -53,7 +54,7 @@ def test_the_errors_come_at_the_rates_set() -> None:
         missed += 20 - len(nearest)
         residuals.append(seen[real, :2] - TRUTH[nearest, :2])
         assert np.all(seen[real, 2] == TRUTH[nearest, 2])  # z as given, no noise
-        expected = np.full(len(track), FALSE_ID, dtype=np.uint32)
+        expected = np.full(len(track), NO_TRACK, dtype=np.uint32)
         expected[real] = IDS[nearest]
         wrong = int(np.sum(track != expected))
         swapped += wrong > 0
@@ -90,7 +91,7 @@ def test_the_same_seed_gives_the_same_frames() -> None:
 def test_two_dimensional_positions_are_taken() -> None:
     seen, track = observe(CameraSettings(false_rate=1.0), np.random.default_rng(2),
                           TRUTH[:, :2], IDS)
-    assert seen.shape[1] == 2 and FALSE_ID in track.tolist()
+    assert seen.shape[1] == 2 and NO_TRACK in track.tolist()
 
 
 @pytest.mark.parametrize(('change', 'name'), [
