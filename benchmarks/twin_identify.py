@@ -17,14 +17,14 @@ Study: the twin's on-line identification of d and mu_C, truths away from the pri
 The plant is the physics core: seven pieces on a cone reversing between -v and v every 2 s
 (at 6 rad/s they stick to it: d changes no position, mu_C none by more than 0.2 mm in 6 s;
 at 8 rad/s the outer ones slide and leave, and d and mu_C move them by centimetres), seen
-at 30 frames/s with 1 mm of noise for 6 s. The twin (32 members) starts from the
+at 30 frames/s with 1 mm of noise for 6 s. The twin (32 members, 32 values of d and mu_C) starts from the
 file's prior (d 225 +- 50 % on the log scale, mu_C 0.85 +- 0.15) and gets the detections
 and the cone speed. For each truth it prints the estimates with their spreads and the
 errors in spreads (z), for the window smoother (``window`` 0.5 s, the default) and the
 frame-by-frame analysis (``window`` 0)::
 
     .venv/bin/python benchmarks/twin_identify.py [--seconds 6] [--members 32] [--speed 6 8]
-        [--window 0.5 0]
+        [--window 0.5 0] [--particles 32] [--smoother-pieces 6] [--seed 1]
 """
 
 import argparse
@@ -54,7 +54,8 @@ TRUTHS = [{'d': 450.0, 'mu_C': 0.85}, {'d': 225.0, 'mu_C': 0.7}, {'d': 450.0, 'm
           {'d': 100.0, 'mu_C': 1.0}]
 
 
-def case(truth: dict, window: float, seconds: float, members: int, speed: float) -> None:
+def case(truth: dict, window: float, seconds: float, settings: TwinSettings,
+         speed: float) -> None:
     """Follow the plant of truth with the twin; print the estimates against the truth."""
     profile = reversing(speed)
     model = ModelParams()
@@ -62,8 +63,7 @@ def case(truth: dict, window: float, seconds: float, members: int, speed: float)
     product = replace(model.product, **truth)
     q = np.array([[x, y, resting_height(model, product, x, y)] for x, y in PLACES])
     plant, _ = add_particles(SimState(), params, q, products=[product] * len(q))
-    twin = Twin(params, TwinSettings(members=members, sigma=0.001, mu_C_spread=0.15, seed=1,
-                                     window=window))
+    twin = Twin(params, replace(settings, window=window))
     rng = np.random.default_rng(0)
     start = time.perf_counter()
     for k in range(1, int(round(30 * seconds)) + 1):
@@ -88,13 +88,18 @@ def main() -> None:
     parser.add_argument('--members', type=int, default=32)
     parser.add_argument('--speed', type=float, nargs='+', default=[6.0, 8.0])
     parser.add_argument('--window', type=float, nargs='+', default=[0.5, 0.0])
+    parser.add_argument('--seed', type=int, default=1, help="the twin's seed")
+    parser.add_argument('--particles', type=int, default=TwinSettings.particles)
+    parser.add_argument('--smoother-pieces', type=int, default=TwinSettings.smoother_pieces)
     args = parser.parse_args()
+    settings = TwinSettings(members=args.members, sigma=0.001, mu_C_spread=0.15, seed=args.seed,
+                            particles=args.particles, smoother_pieces=args.smoother_pieces)
     print(calibration_line(), flush=True)
     warm_up()
     for speed in args.speed:
         for truth in TRUTHS:
             for window in args.window:
-                case(truth, window, args.seconds, args.members, speed)
+                case(truth, window, args.seconds, settings, speed)
     print(calibration_line(), flush=True)
 
 

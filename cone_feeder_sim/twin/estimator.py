@@ -63,7 +63,8 @@ from ..physics.simulation import (
 from ..physics.stop import StopFlag
 
 __all__ = ['CALIBRATED_MEMBERS', 'Exit', 'Frame', 'parameter_note', 'STILL', 'TUNING', 'Twin',
-           'TwinSettings']
+           'TwinSettings',
+           'window_log_likelihood']
 
 #: The ranges the members' parameters are held in: log d (d in N*s/m) and mu_C.
 LOG_D_RANGE = (math.log(1.0), math.log(1.0e4))
@@ -108,7 +109,14 @@ class TwinSettings:
     member with its parameters at the window's start, runs over the window alongside the
     twin's, without analyses), instead of frame by frame; 0: frame by frame, by the
     Kalman update with the pieces' states (overconfident: doc/twin.md); confirm: the
-    frames in which a new piece must be seen before it counts (1: at once);
+    frames in which a new piece must be seen before it counts (1: at once); particles:
+    with a window, the particle step weighs this many values of d and mu_C (at least
+    members; the members run with the first of them, a random choice after each step), so
+    that their spread holds whatever the members (doc/twin.md: 4 or 8 members weighing
+    their own values were over-confident); smoother_pieces: each weighs the window's
+    detections of at most this many pieces, those sliding fastest at the window's start
+    (the others ride with the cone and tell little of d and mu_C), so that its cost is
+    particles x smoother_pieces whatever the pieces on the cone;
     tentative_after: a piece not yet confirmed and not seen for this long (s) is dropped;
     localize_below: the analysis is localized by piece (:mod:`.enkf`) when the ensemble has
     fewer members than this. Measured on benchmarks/twin_forecast_scores.py (30 s, seed 1):
@@ -135,13 +143,15 @@ class TwinSettings:
     confirm: int = 2
     tentative_after: float = 0.1
     localize_below: int = 16
+    particles: int = 32
+    smoother_pieces: int = 6
 
 
 #: The settings besides members, sigma, seed, d and mu_C (a twin file's keys and twin_node's
 #: parameters of the same names): their lower bounds; an int bound: an integer setting.
 TUNING = {'d_spread': 0.0, 'mu_C_spread': 0.0, 'drift': 0.0, 'inflation': 1.0,
           'death_after': 0.0, 'loosen': 1.0, 'window': 0.0, 'confirm': 1,
-          'tentative_after': 0.0, 'localize_below': 0}
+          'tentative_after': 0.0, 'localize_below': 0, 'particles': 2, 'smoother_pieces': 1}
 
 
 @dataclass(frozen=True)
@@ -192,6 +202,32 @@ def parameter_note(members: int) -> str:
             'doc/twin.md)')
 
 
+def window_log_likelihood(residuals: np.ndarray, ids: np.ndarray, start: dict[int, float],
+                          sigma: float) -> np.ndarray:
+    """
+    Return each smoother member's log-likelihood (P,) of a window's detections (up to a constant).
+
+    residuals (P, k): predicted minus detected x, y (m), each column a detection's axis of
+    the piece ``ids`` (k,); start: each piece's position variance per axis over the members
+    at the window's start (m^2); sigma: the detections' noise (m). The smoother members all
+    start from the members' mean, whose error (variance ``start``) moves each prediction of
+    the piece alike: the residuals of a piece are the noise plus one offset b ~ N(0, c I)
+    per piece over the window, integrated out (Woodbury): r'S^-1 r = |r|^2 / sigma^2 -
+    c / (sigma^2 (sigma^2 + n c)) |sum r|^2 per axis, n the piece's frames. Without it the
+    mean's error counted as evidence frame after frame, and 4 or 8 members' d and mu_C
+    were over-confident (doc/twin.md).
+    """
+    s2 = sigma ** 2
+    quadratic = np.sum(residuals ** 2, axis=1) / s2
+    for piece, c in start.items():
+        for axis in (0, 1):
+            columns = np.flatnonzero(ids == piece)[axis::2]
+            if len(columns) and c > 0.0:
+                total = residuals[:, columns].sum(axis=1)
+                quadratic -= c / (s2 * (s2 + len(columns) * c)) * total ** 2
+    return -0.5 * quadratic
+
+
 #: The members' parameters at one time: log d (M,) and mu_C (M,).
 Walk = tuple[np.ndarray, np.ndarray]
 
@@ -217,8 +253,10 @@ class Twin:
         self.stop = stop or StopFlag()
         self.rng = np.random.default_rng(settings.seed)
         m = settings.members
-        self.log_d = math.log(settings.d) + settings.d_spread * self.rng.standard_normal(m)
-        self.mu_c = settings.mu_C + settings.mu_C_spread * self.rng.standard_normal(m)
+        #: d's and mu_C's values (P,): log d and mu_C; member k runs with the k-th
+        p = max(settings.particles, m) if settings.window > 0.0 else m
+        self.log_d = math.log(settings.d) + settings.d_spread * self.rng.standard_normal(p)
+        self.mu_c = settings.mu_C + settings.mu_C_spread * self.rng.standard_normal(p)
         self.states = [SimState(t=t0) for _ in range(m)]
         self.times, self.omegas = [t0], [0.0]
         self._profile = RotationProfile(np.array(self.times), np.array(self.omegas))
@@ -243,6 +281,10 @@ class Twin:
         self._walk: Walk | None = None  # where the window's random walk ends
         self._predicted: list[np.ndarray] = []
         self._observed: list[np.ndarray] = []
+        #: the piece of each of those detections' columns (k,) per frame, and each smoother
+        #: piece's position variance over the members at the window's start (m^2, per axis)
+        self._observed_ids: list[np.ndarray] = []
+        self._start_spread: dict[int, float] = {}
 
     def snapshot(self) -> 'Twin':
         """Return a copy that goes on apart from this twin (its random numbers included)."""
@@ -256,6 +298,7 @@ class Twin:
         other._exits, other._left = list(self._exits), list(self._left)
         other._smoother = None if self._smoother is None else list(self._smoother)
         other._predicted, other._observed = list(self._predicted), list(self._observed)
+        other._observed_ids = list(self._observed_ids)
         return other
 
     @property
@@ -525,17 +568,20 @@ class Twin:
 
         The smoother's members ran over the window alongside the twin's, without analyses,
         each with one member's parameters (:meth:`_start_window`); the likelihood of the
-        window's detections given its predictions weighs them, and the members' parameters
-        are resampled and jittered.
+        window's detections given its predictions weighs them, and the values are resampled,
+        jittered and put in a random order: the members take the first of them.
         Measured against the frame-by-frame Kalman update of the parameters (window 0) and
         a linear ensemble smoother over the window (tried, not kept): doc/twin.md.
         """
         if not self._predicted:
             return
         g, y = np.concatenate(self._predicted, axis=1), np.concatenate(self._observed)
-        log_likelihood = -0.5 * np.sum((g - y) ** 2, axis=1) / self.settings.sigma ** 2
+        log_likelihood = window_log_likelihood(g - y, np.concatenate(self._observed_ids),
+                                               self._start_spread, self.settings.sigma)
         parameters, _ = resample_parameters(np.column_stack([self.log_d, self.mu_c]),
                                             log_likelihood, self.rng)
+        # systematic resampling keeps the parents' order: the members take a random choice
+        parameters = parameters[self.rng.permutation(len(parameters))]
         self.log_d = np.clip(parameters[:, 0], *LOG_D_RANGE)
         self.mu_c = np.clip(parameters[:, 1], *MU_C_RANGE)  # the members take them next
 
@@ -554,32 +600,39 @@ class Twin:
         194 / 158 / 24, 0.301 kg; the members going to the end in a straight line 200 / 154 /
         29, 0.299 kg.
 
-        Each smoother member is the members' mean state with one member's own parameters,
-        so that their predictions differ by their parameters alone: run from their own
-        states, the state's noise made the likelihoods differ by tens to thousands for
+        Each smoother member is the members' mean state with one of the P values of d and
+        mu_C (:attr:`log_d`, :attr:`mu_c`), so that their predictions differ by their
+        parameters alone: run from the members' own states, the state's noise made the likelihoods differ by tens to thousands for
         parameters that change no position (pieces that stick), the weights a lottery, and
         the parameters drift (mu_C to 0.98 +- 0.04 for a truth of 0.7,
         benchmarks/twin_identify.py at 6 rad/s). They run frame by frame with the twin's
         members (:meth:`predict`), so that no frame carries the whole window's run. Only the
-        pieces every member holds now, and still holds at a frame, count.
+        pieces every member holds now, and still holds at a frame, count; of them the
+        ``smoother_pieces`` that slide fastest relative to the cone in the members' mean (ties:
+        the older).
         """
         self._window_t0, self._predicted, self._observed = t, [], []
+        self._observed_ids, self._start_spread = [], {}
         self._smoother = None
         self._drifted = t
         scale = self.settings.drift * math.sqrt(self.settings.window)
-        m = len(self.log_d)
-        self._walk = (np.clip(self.log_d + scale * self.rng.standard_normal(m), *LOG_D_RANGE),
-                      np.clip(self.mu_c + scale * self.rng.standard_normal(m), *MU_C_RANGE))
+        p = len(self.log_d)
+        self._walk = (np.clip(self.log_d + scale * self.rng.standard_normal(p), *LOG_D_RANGE),
+                      np.clip(self.mu_c + scale * self.rng.standard_normal(p), *MU_C_RANGE))
         self.states = [self._with_products(s, k) for k, s in enumerate(self.states)]
         if not all(s.count for s in self.states):
             return
         first = self.states[0]
         held = first.ids[np.all([np.isin(first.ids, s.ids) for s in self.states], axis=0)]
+        sliding = np.mean([np.linalg.norm(s.y[self._rows(s, held), 3:6], axis=1)
+                           for s in self.states], axis=0)
+        held = np.sort(held[np.argsort(-sliding, kind='stable')[:self.settings.smoother_pieces]])
         base = remove_particles(first, sorted(set(first.ids.tolist()) - set(held.tolist())))
-        base = replace(base, y=np.mean([s.y[self._rows(s, base.ids)] for s in self.states],
-                                       axis=0))
-        self._smoother = [self._with_products(base, k, self._walk)
-                          for k in range(len(self.states))]
+        rows = np.stack([s.y[self._rows(s, base.ids)] for s in self.states])
+        base = replace(base, y=rows.mean(axis=0))
+        spread = 0.5 * np.sum(rows[:, :, 0:2].var(axis=0, ddof=1), axis=1)
+        self._start_spread = dict(zip(base.ids.tolist(), spread.tolist()))
+        self._smoother = [self._with_products(base, k, self._walk) for k in range(p)]
 
     def _window_frame(self, t: float, ids: np.ndarray, xy: np.ndarray) -> None:
         """Add the smoother's predictions of a frame's associated detections (ids, xy)."""
@@ -592,6 +645,7 @@ class Twin:
         self._predicted.append(np.stack([self._world(s, held, omega)[:, :2].ravel()
                                          for s in self._smoother]))
         self._observed.append(xy[np.isin(ids, held)].ravel())
+        self._observed_ids.append(np.repeat(held, 2))
 
     def _product(self, member: int, mass: float, parameters: Walk | None = None) -> ProductParams:
         log_d, mu_c = parameters or (self.log_d, self.mu_c)

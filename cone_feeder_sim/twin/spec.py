@@ -31,7 +31,7 @@ A twin file is a YAML mapping::
     seed: 0
     # and the estimator's other settings (estimator.TwinSettings, its defaults): d_spread,
     # mu_C_spread, drift, inflation, death_after, loosen, window, confirm, tentative_after,
-    # localize_below
+    # localize_below, particles, smoother_pieces
 
 The settings are twin_node's parameters of the same names, so that a twin_node recording
 run again headless with the node's settings gives the node's estimates (seeded; checked in
