@@ -17,11 +17,11 @@ Study: the twin's on-line identification of d and mu_C, truths away from the pri
 The plant is the physics core: seven pieces on a cone reversing between -v and v every 2 s
 (at 6 rad/s they stick to it: d changes no position, mu_C none by more than 0.2 mm in 6 s;
 at 8 rad/s the outer ones slide and leave, and d and mu_C move them by centimetres), seen
-at 30 frames/s with 1 mm of noise for 6 s. The twin (32 members, 32 values of d and mu_C) starts from the
-file's prior (d 225 +- 50 % on the log scale, mu_C 0.85 +- 0.15) and gets the detections
-and the cone speed. For each truth it prints the estimates with their spreads and the
-errors in spreads (z), for the window smoother (``window`` 0.5 s, the default) and the
-frame-by-frame analysis (``window`` 0)::
+at 30 frames/s with 1 mm of noise for 6 s. The twin (32 members, 32 values of d and mu_C)
+starts from the file's prior (d 225 +- 50 % on the log scale, mu_C 0.85 +- 0.15) and gets
+the detections and the cone speed. For each truth it prints the estimates with their
+spreads and the errors in spreads (z), for the window smoother (``window`` 0.5 s, the
+default) and the frame-by-frame analysis (``window`` 0)::
 
     .venv/bin/python benchmarks/twin_identify.py [--seconds 6] [--members 32] [--speed 6 8]
         [--window 0.5 0] [--particles 32] [--smoother-pieces 6] [--seed 1]

@@ -107,7 +107,7 @@ TWIN_PARAMETERS = (
               '(s) is dropped', limit=Limit(0.0, 3600.0, 's')),
     ParamSpec('localize_below', 16, 'the analysis is localized by piece when members is '
               'below this (doc/twin.md)', limit=Limit(0, 1_000_000, '')),
-    ParamSpec('particles', 32, "the values of d and mu_C each window weighs (at least "
+    ParamSpec('particles', 32, 'the values of d and mu_C each window weighs (at least '
               'members: the members run with some of them)', limit=Limit(2, 10_000, '')),
     ParamSpec('smoother_pieces', 6, 'the pieces whose detections weigh them, the fastest '
               'sliding (each window costs particles x these)', limit=Limit(1, 10_000, '')),

@@ -602,14 +602,14 @@ class Twin:
 
         Each smoother member is the members' mean state with one of the P values of d and
         mu_C (:attr:`log_d`, :attr:`mu_c`), so that their predictions differ by their
-        parameters alone: run from the members' own states, the state's noise made the likelihoods differ by tens to thousands for
-        parameters that change no position (pieces that stick), the weights a lottery, and
-        the parameters drift (mu_C to 0.98 +- 0.04 for a truth of 0.7,
-        benchmarks/twin_identify.py at 6 rad/s). They run frame by frame with the twin's
-        members (:meth:`predict`), so that no frame carries the whole window's run. Only the
-        pieces every member holds now, and still holds at a frame, count; of them the
-        ``smoother_pieces`` that slide fastest relative to the cone in the members' mean (ties:
-        the older).
+        parameters alone: run from the members' own states, the state's noise made the
+        likelihoods differ by tens to thousands for parameters that change no position
+        (pieces that stick), the weights a lottery, and the parameters drift (mu_C to 0.98
+        +- 0.04 for a truth of 0.7, benchmarks/twin_identify.py at 6 rad/s). They run frame
+        by frame with the twin's members (:meth:`predict`), so that no frame carries the
+        whole window's run. Only the pieces every member holds now, and still holds at a
+        frame, count; of them the ``smoother_pieces`` that slide fastest relative to the cone
+        in the members' mean (ties: the older).
         """
         self._window_t0, self._predicted, self._observed = t, [], []
         self._observed_ids, self._start_spread = [], {}
