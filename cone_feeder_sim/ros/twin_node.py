@@ -189,7 +189,7 @@ class TwinNode(GuardedNode):
         self.get_logger().info(
             f'following with {settings.members} members, forecasts every '
             f"{values['forecast_period']:g} s over {', '.join(f'{h:g}' for h in horizons)} s")
-        if note := parameter_note(settings.members):
+        if note := parameter_note(settings):
             self.get_logger().info(note)
 
     def _watch(self) -> None:

@@ -62,9 +62,8 @@ from ..physics.simulation import (
     StepResult, world_from_cone)
 from ..physics.stop import StopFlag
 
-__all__ = ['CALIBRATED_MEMBERS', 'Exit', 'Frame', 'parameter_note', 'STILL', 'TUNING', 'Twin',
-           'TwinSettings',
-           'window_log_likelihood']
+__all__ = ['CALIBRATED_PARTICLES', 'Exit', 'Frame', 'parameter_note', 'STILL', 'TUNING', 'Twin',
+           'TwinSettings', 'weighed_values', 'window_log_likelihood']
 
 #: The ranges the members' parameters are held in: log d (d in N*s/m) and mu_C.
 LOG_D_RANGE = (math.log(1.0), math.log(1.0e4))
@@ -77,10 +76,11 @@ MU_C_RANGE = (0.05, 5.0)
 #: piece sticks: largest height error 555 m, P 59 N, d 39 +- 1 for a truth of 225; now
 #: 0.2 mm, 0.01 N, d 239 +- 70).
 ANALYSED = np.array([0, 1, 3, 4, 6, 7])
-#: The fewest members of those measured whose d and mu_C came within 3 spreads of the truth
-#: in all 16 cases of benchmarks/twin_identify.py (doc/twin.md): with 8 members 5 cases were
-#: beyond, with 4 members 7 (one 22.6 spreads off). Fewer members' spread is over-confident.
-CALIBRATED_MEMBERS = 32
+#: The fewest values of d and mu_C a window weighs whose spread was measured to hold
+#: (benchmarks/twin_identify.py, doc/twin.md): each member weighing its own, 32 members had all
+#: 16 cases within 3 spreads, 8 members 5 cases beyond, 4 members 7 (one 22.6 spreads off);
+#: 32 values with 4 or 8 members, 1 of 48 cases each (seeds 1-3).
+CALIBRATED_PARTICLES = 32
 #: A piece moving slower than this relative to the cone (m/s) rides with it. One that rides
 #: in every member has its position alone analysed (:meth:`Twin._analyse`); a forecast takes
 #: riders out after its probe (:mod:`.forecast`).
@@ -193,12 +193,21 @@ def loosened(params: SimParams, factor: float) -> SimParams:
         atol_velocity=solver.atol_velocity * factor, atol_force=solver.atol_force * factor))
 
 
-def parameter_note(members: int) -> str:
-    """Return what a run of this many members should say of its d and mu_C ('' if nothing)."""
-    if members >= CALIBRATED_MEMBERS:
+def weighed_values(settings: TwinSettings) -> int:
+    """Return how many values of d and mu_C the twin holds: particles (at least members)."""
+    return max(settings.particles, settings.members) if settings.window > 0.0 else settings.members
+
+
+def parameter_note(settings: TwinSettings) -> str:
+    """Return what a run with these settings should say of its d and mu_C ('' if nothing)."""
+    if settings.window <= 0.0:
+        return ('with window 0 (d and mu_C analysed frame by frame) their spread is '
+                'over-confident: their estimates are a trend (doc/twin.md)')
+    values = weighed_values(settings)
+    if values >= CALIBRATED_PARTICLES:
         return ''
-    return (f'with {members} members the spread of d and mu_C is over-confident: their '
-            f'estimates are a trend (a spread that holds from {CALIBRATED_MEMBERS} members, '
+    return (f'with {values} values of d and mu_C (particles) their spread is over-confident: '
+            f'their estimates are a trend (a spread that holds from {CALIBRATED_PARTICLES}, '
             'doc/twin.md)')
 
 
@@ -254,7 +263,7 @@ class Twin:
         self.rng = np.random.default_rng(settings.seed)
         m = settings.members
         #: d's and mu_C's values (P,): log d and mu_C; member k runs with the k-th
-        p = max(settings.particles, m) if settings.window > 0.0 else m
+        p = weighed_values(settings)
         self.log_d = math.log(settings.d) + settings.d_spread * self.rng.standard_normal(p)
         self.mu_c = settings.mu_C + settings.mu_C_spread * self.rng.standard_normal(p)
         self.states = [SimState(t=t0) for _ in range(m)]
@@ -272,8 +281,10 @@ class Twin:
         self._left: list[Exit] = []
         self._drifted = t0
         #: the window: its start (s); the smoother's members (None: nothing to weigh), run
-        #: alongside the twin's; their predictions of the window's detections so far, (M, k)
-        #: per frame, and those detections (k,) (m, x and y of each piece)
+        #: alongside the twin's: one state holding P copies of each piece (id * P + k: the
+        #: k-th value's), or, where pieces touch (contact on), one state per value; their
+        #: predictions of the window's detections so far, (P, k) per frame, and those
+        #: detections (k,) (m, x and y of each piece)
         self._window_t0 = t0
         self._smoother: list[SimState] | None = None
         #: the parameters' random walk over the window: (log d, mu_C) at its start and end
@@ -632,18 +643,39 @@ class Twin:
         base = replace(base, y=rows.mean(axis=0))
         spread = 0.5 * np.sum(rows[:, :, 0:2].var(axis=0, ddof=1), axis=1)
         self._start_spread = dict(zip(base.ids.tolist(), spread.tolist()))
-        self._smoother = [self._with_products(base, k, self._walk) for k in range(p)]
+        members = [self._with_products(base, k, self._walk) for k in range(p)]
+        if self.params.model.interactions.enabled:
+            self._smoother = members
+            return
+        # without contact the copies cannot meet: one state, and one result, for them all
+        n = base.count
+        self._smoother = [replace(
+            base, y=np.repeat(base.y, p, axis=0),
+            products=np.stack([s.products for s in members], axis=1).reshape(n * p, -1),
+            ids=(base.ids[:, None] * p + np.arange(p)).ravel(),
+            step_size=np.repeat(base.step_size, p), next_id=(int(base.ids.max()) + 1) * p)]
 
     def _window_frame(self, t: float, ids: np.ndarray, xy: np.ndarray) -> None:
         """Add the smoother's predictions of a frame's associated detections (ids, xy)."""
         if self._smoother is None:
             return
-        held = ids[np.all([np.isin(ids, s.ids) for s in self._smoother], axis=0)]
+        omega = self._profile.omega(t)
+        p = len(self.log_d)
+        if len(self._smoother) == 1:  # the copies of each piece in one state (P >= 2)
+            state = self._smoother[0]
+            copies = ids[:, None] * p + np.arange(p)
+            whole = np.all(np.isin(copies, state.ids), axis=1)
+            held = ids[whole]
+            rows = np.searchsorted(state.ids, copies[whole].ravel())
+            q, _, _ = world_from_cone(state.y[rows], state.angle, omega)
+            predicted = q[:, :2].reshape(len(held), p, 2).transpose(1, 0, 2).reshape(p, -1)
+        else:
+            held = ids[np.all([np.isin(ids, s.ids) for s in self._smoother], axis=0)]
+            predicted = np.stack([self._world(s, held, omega)[:, :2].ravel()
+                                  for s in self._smoother])
         if not len(held):
             return
-        omega = self._profile.omega(t)
-        self._predicted.append(np.stack([self._world(s, held, omega)[:, :2].ravel()
-                                         for s in self._smoother]))
+        self._predicted.append(predicted)
         self._observed.append(xy[np.isin(ids, held)].ravel())
         self._observed_ids.append(np.repeat(held, 2))
 

@@ -21,11 +21,12 @@ the detections and the cone speed only.
 
 from dataclasses import replace
 
-from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.params import ModelParams, P_D
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
-from cone_feeder_sim.twin.estimator import Frame, STILL, Twin, TwinSettings
+from cone_feeder_sim.twin.estimator import (
+    Frame, parameter_note, STILL, Twin, TwinSettings, weighed_values, window_log_likelihood)
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -168,3 +169,60 @@ def test_bad_input_is_refused_with_its_reason() -> None:
         Twin(PARAMS, TwinSettings(members=1))
     with pytest.raises(ValueError, match='confirm must be at least 1'):
         Twin(PARAMS, TwinSettings(confirm=0))
+
+
+def test_the_window_likelihood_is_the_gaussian_one_with_each_piece_s_offset_integrated_out(
+        ) -> None:
+    # brute force: the residuals' covariance written out (noise on the diagonal, one offset
+    # per piece and axis shared by its frames), inverted densely
+    rng = np.random.default_rng(4)
+    sigma, start = 0.002, {3: 1.0e-6, 7: 4.0e-6, 9: 0.0}
+    ids = np.repeat(np.array([3, 7, 3, 9, 7, 3]), 2)  # frames hold different pieces
+    residuals = rng.normal(0.0, 0.003, (5, len(ids)))
+    axis = np.tile([0, 1], len(ids) // 2)
+    same = (ids[:, None] == ids[None, :]) & (axis[:, None] == axis[None, :])
+    offset = np.array([start[i] for i in ids])
+    covariance = sigma ** 2 * np.eye(len(ids)) + same * offset[:, None]
+    expected = -0.5 * np.einsum('pi,ij,pj->p', residuals,
+                                np.linalg.inv(covariance), residuals)
+    assert np.allclose(window_log_likelihood(residuals, ids, start, sigma), expected,
+                       rtol=1e-12, atol=0.0)
+
+
+def test_a_window_weighs_the_values_of_d_and_mu_c_by_the_fastest_sliding_pieces() -> None:
+    settings = TwinSettings(members=4, particles=16, smoother_pieces=2, sigma=0.001, seed=3)
+    twin = Twin(PARAMS, settings)
+    assert len(twin.log_d) == len(twin.mu_c) == weighed_values(settings) == 16
+    # three pieces at rest on a cone at rest, the middle one given a slide in every member
+    twin.update(0.0, np.array([[0.10, 0.0], [0.0, 0.11], [-0.12, 0.0]]))
+    twin.states = [replace(s, y=s.y.copy()) for s in twin.states]
+    for state in twin.states:
+        state.y[1, 3:5] = [0.05, 0.0]
+    twin._start_window(0.0)
+    # one state (no contact): 16 copies of the slider and of the older of the others
+    assert twin._smoother is not None and len(twin._smoother) == 1
+    copies = twin._smoother[0]
+    assert copies.ids.tolist() == [*range(16), *range(16, 32)]  # piece * 16 + value
+    for k in range(16):  # each copy with its value of d
+        assert np.all(copies.products[[k, 16 + k], P_D] == pytest.approx(np.exp(twin._walk[0][k])))
+    # the copies predict what one state per value predicts (the separate layout, for
+    # contact), bit for bit: pieces apart are integrated alike in either
+    apart = twin.snapshot()
+    apart._smoother = [replace(copies, y=copies.y[[k, 16 + k]], ids=np.array([0, 1]),
+                               products=copies.products[[k, 16 + k]],
+                               step_size=copies.step_size[[k, 16 + k]], next_id=2)
+                       for k in range(16)]
+    for t in (1 / 30, 2 / 30):
+        frame = np.array([[0.10, 0.0], [0.0, 0.11], [-0.12, 0.0]])
+        twin.update(t, frame)
+        apart.update(t, frame)
+    assert len(twin._predicted) == len(apart._predicted) == 2
+    for a, b in zip(twin._predicted, apart._predicted):
+        assert a.shape == (16, 4) and np.array_equal(a, b)
+
+
+def test_the_note_names_too_few_values_of_d_and_mu_c() -> None:
+    assert parameter_note(TwinSettings(members=4)) == ''  # 32 values, whatever the members
+    assert '8 values of d and mu_C' in parameter_note(TwinSettings(members=4, particles=8))
+    assert parameter_note(TwinSettings(members=40, particles=8)) == ''  # as many as members
+    assert 'window 0' in parameter_note(TwinSettings(window=0.0))
