@@ -21,10 +21,11 @@ and 2 s) with M members (default: the twin file's, 8); prints the wall time of t
 against the stream's 60 s::
 
     .venv/bin/python benchmarks/twin_headless.py [--seconds 60] [--members 32 8]
-        [--riders true false]
+        [--riders true false] [--smoother-pieces 6 4 6 4]
 
 --riders false integrates every piece of a forecast to the horizon (forecast.forecast's
-riders), to compare with the default side by side.
+riders), to compare with the default side by side; --smoother-pieces runs each count in
+turn (the pieces a window weighs d and mu_C by; default: the twin file's).
 """
 
 import argparse
@@ -38,6 +39,7 @@ from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, warm_up, world_from_cone)
+from cone_feeder_sim.twin.estimator import TwinSettings
 from cone_feeder_sim.twin.run import run_twin
 from cone_feeder_sim.twin.spec import load_twin, TwinSpec
 import numpy as np
@@ -101,19 +103,26 @@ def main() -> None:
     parser.add_argument('--seconds', type=float, default=60.0)
     parser.add_argument('--members', type=int, nargs='+', default=[None])
     parser.add_argument('--riders', choices=['true', 'false'], nargs='+', default=['true'])
+    parser.add_argument('--smoother-pieces', type=int, nargs='+', default=[None])
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     warm_up()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         write_stream(folder, args.seconds)
-        for members, riders in ((m, r) for m in args.members for r in args.riders):
-            spec = stream_twin(folder, **({} if members is None else {'members': members}))
+        runs = ((m, r, k) for m in args.members for r in args.riders
+                for k in args.smoother_pieces)
+        for n, (members, riders, pieces) in enumerate(runs):
+            settings = {key: value for key, value in (('members', members),
+                                                      ('smoother_pieces', pieces))
+                        if value is not None}
+            spec = stream_twin(folder, **settings)
             start = time.perf_counter()
-            summary = run_twin(spec, folder / f'out{spec.members}{riders}',
-                               riders=riders == 'true')
+            summary = run_twin(spec, folder / f'out{n}', riders=riders == 'true')
             wall = time.perf_counter() - start
-            print(f'M = {spec.members}, riders {riders}: {wall:.1f} s wall for a '
+            chosen = spec.tuning.get('smoother_pieces', TwinSettings.smoother_pieces)
+            print(f'M = {spec.members}, riders {riders}, smoother_pieces {chosen}: '
+                  f'{wall:.1f} s wall for a '
                   f'{args.seconds:g}-s stream of 30 pieces ({summary.frames} frames, '
                   f'{summary.forecasts} forecasts, NIS {summary.nis:.0f} for '
                   f'{summary.observed})', flush=True)
