@@ -32,7 +32,7 @@ Scores:
   run) and the empty forecast (none)::
 
     .venv/bin/python benchmarks/twin_forecast_scores.py [--seconds 12] [--members 16] [--seed 1]
-        [--truth 315 0.78]
+        [--truth 315 0.78] [--particles 32] [--smoother-pieces 6]
 """
 
 import argparse
@@ -128,6 +128,8 @@ def main() -> None:
     parser.add_argument('--seconds', type=float, default=12.0)
     parser.add_argument('--members', type=int, default=16)
     parser.add_argument('--seed', type=int, default=1, help="the twin's seed")
+    parser.add_argument('--particles', type=int, default=TwinSettings.particles)
+    parser.add_argument('--smoother-pieces', type=int, default=TwinSettings.smoother_pieces)
     parser.add_argument('--truth', type=float, nargs=2, metavar=('D', 'MU_C'),
                         help="the plant's d and mu_C (default: the prior's)")
     args = parser.parse_args()
@@ -146,7 +148,9 @@ def main() -> None:
     exit_of = {i: (t, c) for i, t, c, _ in exits}
     closed = open_loop(params, profile, plant['first'], args.seconds)
     channels = model.channels.count
-    twin = Twin(params, TwinSettings(members=args.members, sigma=0.002, seed=args.seed))
+    twin = Twin(params, TwinSettings(members=args.members, sigma=0.002, seed=args.seed,
+                                     particles=args.particles,
+                                     smoother_pieces=args.smoother_pieces))
     tracks: dict[int, list] = {}
     picks: dict[float, dict] = {}  # forecast time: plant id -> (twin, line) channels
     masses: dict[float, dict] = {}  # forecast time: method -> (W, C) kg

@@ -110,7 +110,8 @@ TWIN_PARAMETERS = (
     ParamSpec('particles', 32, 'the values of d and mu_C each window weighs (at least '
               'members: the members run with some of them)', limit=Limit(2, 10_000, '')),
     ParamSpec('smoother_pieces', 6, 'the pieces whose detections weigh them, the fastest '
-              'sliding (each window costs particles x these)', limit=Limit(1, 10_000, '')),
+              'sliding (each frame integrates (particles + members) x these more)',
+              limit=Limit(1, 10_000, '')),
 )
 #: How often (s) the watcher looks whether the context was shut down.
 STOP_POLL = 0.05

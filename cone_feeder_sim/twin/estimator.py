@@ -116,7 +116,7 @@ class TwinSettings:
     their own values were over-confident); smoother_pieces: each weighs the window's
     detections of at most this many pieces, those sliding fastest at the window's start
     (the others ride with the cone and tell little of d and mu_C), so that its cost is
-    particles x smoother_pieces whatever the pieces on the cone;
+    (particles + members) x smoother_pieces whatever the pieces on the cone;
     tentative_after: a piece not yet confirmed and not seen for this long (s) is dropped;
     localize_below: the analysis is localized by piece (:mod:`.enkf`) when the ensemble has
     fewer members than this. Measured on benchmarks/twin_forecast_scores.py (30 s, seed 1):
@@ -211,29 +211,31 @@ def parameter_note(settings: TwinSettings) -> str:
             'doc/twin.md)')
 
 
-def window_log_likelihood(residuals: np.ndarray, ids: np.ndarray, start: dict[int, float],
+def window_log_likelihood(residuals: np.ndarray, anomalies: np.ndarray, ids: np.ndarray,
                           sigma: float) -> np.ndarray:
     """
-    Return each smoother member's log-likelihood (P,) of a window's detections (up to a constant).
+    Return each value's log-likelihood (P,) of a window's detections (up to a constant).
 
-    residuals (P, k): predicted minus detected x, y (m), each column a detection's axis of
-    the piece ``ids`` (k,); start: each piece's position variance per axis over the members
-    at the window's start (m^2); sigma: the detections' noise (m). The smoother members all
-    start from the members' mean, whose error (variance ``start``) moves each prediction of
-    the piece alike: the residuals of a piece are the noise plus one offset b ~ N(0, c I)
-    per piece over the window, integrated out (Woodbury): r'S^-1 r = |r|^2 / sigma^2 -
-    c / (sigma^2 (sigma^2 + n c)) |sum r|^2 per axis, n the piece's frames. Without it the
-    mean's error counted as evidence frame after frame, and 4 or 8 members' d and mu_C
-    were over-confident (doc/twin.md).
+    residuals (P, k): the smoother's predictions from the members' mean start minus the
+    detections (m), each column one axis of one detection of the piece ``ids`` (k,);
+    anomalies (M, k): the same columns predicted from each member's own start (with the
+    values' mean d and mu_C), minus their mean (m); sigma: the detections' noise (m). The
+    mean start's error moves a piece's predictions together, as the members' starts move
+    theirs: per piece, the residuals' covariance is sigma^2 I + A'A / (M - 1), A its
+    columns of ``anomalies``, inverted by Woodbury (rank M): r'S^-1 r = |r|^2 / sigma^2 -
+    (A r)' ((M - 1) sigma^2 I + A A')^-1 (A r) / sigma^2. Counted as evidence frame after
+    frame instead, the mean's error made 4 or 8 members' d and mu_C over-confident
+    (doc/twin.md).
     """
     s2 = sigma ** 2
+    members = anomalies.shape[0]
     quadratic = np.sum(residuals ** 2, axis=1) / s2
-    for piece, c in start.items():
-        for axis in (0, 1):
-            columns = np.flatnonzero(ids == piece)[axis::2]
-            if len(columns) and c > 0.0:
-                total = residuals[:, columns].sum(axis=1)
-                quadratic -= c / (s2 * (s2 + len(columns) * c)) * total ** 2
+    for piece in np.unique(ids):
+        columns = ids == piece
+        a = anomalies[:, columns]  # (M, n)
+        projected = residuals[:, columns] @ a.T  # (P, M)
+        gram = (members - 1) * s2 * np.eye(members) + a @ a.T
+        quadratic -= np.sum(projected * np.linalg.solve(gram, projected.T).T, axis=1) / s2
     return -0.5 * quadratic
 
 
@@ -292,10 +294,10 @@ class Twin:
         self._walk: Walk | None = None  # where the window's random walk ends
         self._predicted: list[np.ndarray] = []
         self._observed: list[np.ndarray] = []
-        #: the piece of each of those detections' columns (k,) per frame, and each smoother
-        #: piece's position variance over the members at the window's start (m^2, per axis)
+        #: the piece of each of those detections' columns (k,) per frame, and the columns
+        #: predicted from each member's start (M, k), minus their mean (m)
         self._observed_ids: list[np.ndarray] = []
-        self._start_spread: dict[int, float] = {}
+        self._anomalies: list[np.ndarray] = []
 
     def snapshot(self) -> 'Twin':
         """Return a copy that goes on apart from this twin (its random numbers included)."""
@@ -309,7 +311,7 @@ class Twin:
         other._exits, other._left = list(self._exits), list(self._left)
         other._smoother = None if self._smoother is None else list(self._smoother)
         other._predicted, other._observed = list(self._predicted), list(self._observed)
-        other._observed_ids = list(self._observed_ids)
+        other._observed_ids, other._anomalies = list(self._observed_ids), list(self._anomalies)
         return other
 
     @property
@@ -587,8 +589,9 @@ class Twin:
         if not self._predicted:
             return
         g, y = np.concatenate(self._predicted, axis=1), np.concatenate(self._observed)
-        log_likelihood = window_log_likelihood(g - y, np.concatenate(self._observed_ids),
-                                               self._start_spread, self.settings.sigma)
+        log_likelihood = window_log_likelihood(g - y, np.concatenate(self._anomalies, axis=1),
+                                               np.concatenate(self._observed_ids),
+                                               self.settings.sigma)
         parameters, _ = resample_parameters(np.column_stack([self.log_d, self.mu_c]),
                                             log_likelihood, self.rng)
         # systematic resampling keeps the parents' order: the members take a random choice
@@ -620,10 +623,13 @@ class Twin:
         by frame with the twin's members (:meth:`predict`), so that no frame carries the
         whole window's run. Only the pieces every member holds now, and still holds at a
         frame, count; of them the ``smoother_pieces`` that slide fastest relative to the cone
-        in the members' mean (ties: the older).
+        in the members' mean (ties: the older). M more smoother members run from each
+        member's own state with the values' mean d and mu_C: how their predictions spread is
+        what the mean start's error does to the smoother's, which the likelihood integrates
+        out (:func:`window_log_likelihood`).
         """
         self._window_t0, self._predicted, self._observed = t, [], []
-        self._observed_ids, self._start_spread = [], {}
+        self._observed_ids, self._anomalies = [], []
         self._smoother = None
         self._drifted = t
         scale = self.settings.drift * math.sqrt(self.settings.window)
@@ -640,42 +646,45 @@ class Twin:
         held = np.sort(held[np.argsort(-sliding, kind='stable')[:self.settings.smoother_pieces]])
         base = remove_particles(first, sorted(set(first.ids.tolist()) - set(held.tolist())))
         rows = np.stack([s.y[self._rows(s, base.ids)] for s in self.states])
-        base = replace(base, y=rows.mean(axis=0))
-        spread = 0.5 * np.sum(rows[:, :, 0:2].var(axis=0, ddof=1), axis=1)
-        self._start_spread = dict(zip(base.ids.tolist(), spread.tolist()))
-        members = [self._with_products(base, k, self._walk) for k in range(p)]
+        # the P values from the members' mean start, then each member's start with the
+        # values' mean (what the mean start's error does to the predictions)
+        mean = (np.array([self._walk[0].mean()]), np.array([self._walk[1].mean()]))
+        members = ([self._with_products(replace(base, y=rows.mean(axis=0)), k, self._walk)
+                    for k in range(p)]
+                   + [self._with_products(replace(base, y=y), 0, mean) for y in rows])
         if self.params.model.interactions.enabled:
             self._smoother = members
             return
         # without contact the copies cannot meet: one state, and one result, for them all
-        n = base.count
+        n, q = base.count, len(members)
         self._smoother = [replace(
-            base, y=np.repeat(base.y, p, axis=0),
-            products=np.stack([s.products for s in members], axis=1).reshape(n * p, -1),
-            ids=(base.ids[:, None] * p + np.arange(p)).ravel(),
-            step_size=np.repeat(base.step_size, p), next_id=(int(base.ids.max()) + 1) * p)]
+            base, y=np.stack([s.y for s in members], axis=1).reshape(n * q, -1),
+            products=np.stack([s.products for s in members], axis=1).reshape(n * q, -1),
+            ids=(base.ids[:, None] * q + np.arange(q)).ravel(),
+            step_size=np.repeat(base.step_size, q), next_id=(int(base.ids.max()) + 1) * q)]
 
     def _window_frame(self, t: float, ids: np.ndarray, xy: np.ndarray) -> None:
         """Add the smoother's predictions of a frame's associated detections (ids, xy)."""
         if self._smoother is None:
             return
         omega = self._profile.omega(t)
-        p = len(self.log_d)
-        if len(self._smoother) == 1:  # the copies of each piece in one state (P >= 2)
+        p, q = len(self.log_d), len(self.log_d) + len(self.states)
+        if len(self._smoother) == 1:  # the copies of each piece in one state (q >= 4)
             state = self._smoother[0]
-            copies = ids[:, None] * p + np.arange(p)
+            copies = ids[:, None] * q + np.arange(q)
             whole = np.all(np.isin(copies, state.ids), axis=1)
             held = ids[whole]
             rows = np.searchsorted(state.ids, copies[whole].ravel())
-            q, _, _ = world_from_cone(state.y[rows], state.angle, omega)
-            predicted = q[:, :2].reshape(len(held), p, 2).transpose(1, 0, 2).reshape(p, -1)
+            at, _, _ = world_from_cone(state.y[rows], state.angle, omega)
+            predicted = at[:, :2].reshape(len(held), q, 2).transpose(1, 0, 2).reshape(q, -1)
         else:
             held = ids[np.all([np.isin(ids, s.ids) for s in self._smoother], axis=0)]
             predicted = np.stack([self._world(s, held, omega)[:, :2].ravel()
                                   for s in self._smoother])
         if not len(held):
             return
-        self._predicted.append(predicted)
+        self._predicted.append(predicted[:p])
+        self._anomalies.append(predicted[p:] - predicted[p:].mean(axis=0))
         self._observed.append(xy[np.isin(ids, held)].ravel())
         self._observed_ids.append(np.repeat(held, 2))
 

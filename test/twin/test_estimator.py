@@ -171,22 +171,26 @@ def test_bad_input_is_refused_with_its_reason() -> None:
         Twin(PARAMS, TwinSettings(confirm=0))
 
 
-def test_the_window_likelihood_is_the_gaussian_one_with_each_piece_s_offset_integrated_out(
+def test_the_window_likelihood_is_the_gaussian_one_with_the_start_s_error_integrated_out(
         ) -> None:
-    # brute force: the residuals' covariance written out (noise on the diagonal, one offset
-    # per piece and axis shared by its frames), inverted densely
+    # brute force: the residuals' covariance written out (the noise on the diagonal, each
+    # piece's columns moved together as the members' starts move them), inverted densely
     rng = np.random.default_rng(4)
-    sigma, start = 0.002, {3: 1.0e-6, 7: 4.0e-6, 9: 0.0}
+    sigma, members = 0.002, 4
     ids = np.repeat(np.array([3, 7, 3, 9, 7, 3]), 2)  # frames hold different pieces
     residuals = rng.normal(0.0, 0.003, (5, len(ids)))
-    axis = np.tile([0, 1], len(ids) // 2)
-    same = (ids[:, None] == ids[None, :]) & (axis[:, None] == axis[None, :])
-    offset = np.array([start[i] for i in ids])
-    covariance = sigma ** 2 * np.eye(len(ids)) + same * offset[:, None]
+    anomalies = rng.normal(0.0, 0.001, (members, len(ids)))
+    anomalies -= anomalies.mean(axis=0)
+    same = ids[:, None] == ids[None, :]
+    covariance = (sigma ** 2 * np.eye(len(ids))
+                  + same * (anomalies.T @ anomalies) / (members - 1))
     expected = -0.5 * np.einsum('pi,ij,pj->p', residuals,
                                 np.linalg.inv(covariance), residuals)
-    assert np.allclose(window_log_likelihood(residuals, ids, start, sigma), expected,
-                       rtol=1e-12, atol=0.0)
+    found = window_log_likelihood(residuals, anomalies, ids, sigma)
+    assert np.allclose(found, expected, rtol=1e-10, atol=0.0)
+    # members that agree leave the plain Gaussian
+    plain = -0.5 * np.sum(residuals ** 2, axis=1) / sigma ** 2
+    assert np.array_equal(window_log_likelihood(residuals, 0.0 * anomalies, ids, sigma), plain)
 
 
 def test_a_window_weighs_the_values_of_d_and_mu_c_by_the_fastest_sliding_pieces() -> None:
@@ -199,26 +203,34 @@ def test_a_window_weighs_the_values_of_d_and_mu_c_by_the_fastest_sliding_pieces(
     for state in twin.states:
         state.y[1, 3:5] = [0.05, 0.0]
     twin._start_window(0.0)
-    # one state (no contact): 16 copies of the slider and of the older of the others
+    # one state (no contact): of the slider and of the older of the others, 16 copies from
+    # the members' mean (one per value), then 4 from each member's start (the values' mean)
     assert twin._smoother is not None and len(twin._smoother) == 1
     copies = twin._smoother[0]
-    assert copies.ids.tolist() == [*range(16), *range(16, 32)]  # piece * 16 + value
-    for k in range(16):  # each copy with its value of d
-        assert np.all(copies.products[[k, 16 + k], P_D] == pytest.approx(np.exp(twin._walk[0][k])))
-    # the copies predict what one state per value predicts (the separate layout, for
-    # contact), bit for bit: pieces apart are integrated alike in either
+    assert copies.ids.tolist() == [*range(20), *range(20, 40)]  # piece * 20 + copy
+    starts = np.stack([s.y[:2] for s in twin.states])
+    for k in range(16):  # each with its value of d
+        assert np.all(copies.products[[k, 20 + k], P_D]
+                      == pytest.approx(np.exp(twin._walk[0][k])))
+        assert np.array_equal(copies.y[[k, 20 + k]], starts.mean(axis=0))
+    for j in range(4):
+        assert np.all(copies.products[[16 + j, 36 + j], P_D]
+                      == pytest.approx(np.exp(np.mean(twin._walk[0]))))
+        assert np.array_equal(copies.y[[16 + j, 36 + j]], starts[j])
+    # the copies predict what one state per copy predicts (the layout for contact), bit for
+    # bit: pieces apart are integrated alike in either
     apart = twin.snapshot()
-    apart._smoother = [replace(copies, y=copies.y[[k, 16 + k]], ids=np.array([0, 1]),
-                               products=copies.products[[k, 16 + k]],
-                               step_size=copies.step_size[[k, 16 + k]], next_id=2)
-                       for k in range(16)]
+    apart._smoother = [replace(copies, y=copies.y[[k, 20 + k]], ids=np.array([0, 1]),
+                               products=copies.products[[k, 20 + k]],
+                               step_size=copies.step_size[[k, 20 + k]], next_id=2)
+                       for k in range(20)]
     for t in (1 / 30, 2 / 30):
         frame = np.array([[0.10, 0.0], [0.0, 0.11], [-0.12, 0.0]])
         twin.update(t, frame)
         apart.update(t, frame)
     assert len(twin._predicted) == len(apart._predicted) == 2
-    for a, b in zip(twin._predicted, apart._predicted):
-        assert a.shape == (16, 4) and np.array_equal(a, b)
+    for a, b in zip(twin._predicted + twin._anomalies, apart._predicted + apart._anomalies):
+        assert a.shape in ((16, 4), (4, 4)) and np.array_equal(a, b)
 
 
 def test_the_note_names_too_few_values_of_d_and_mu_c() -> None:
