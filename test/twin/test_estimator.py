@@ -238,3 +238,20 @@ def test_the_note_names_too_few_values_of_d_and_mu_c() -> None:
     assert '8 values of d and mu_C' in parameter_note(TwinSettings(members=4, particles=8))
     assert parameter_note(TwinSettings(members=40, particles=8)) == ''  # as many as members
     assert 'window 0' in parameter_note(TwinSettings(window=0.0))
+
+
+def test_with_the_pair_law_on_each_smoother_member_is_a_state_of_its_own() -> None:
+    # copies of one piece in one state would touch: with contact each value, and each
+    # member's start, runs in a state of its own
+    touching = replace(MODEL, interactions=replace(MODEL.interactions, enabled=True))
+    twin = Twin(SimParams(model=touching), TwinSettings(members=4, particles=8, sigma=0.001,
+                                                        smoother_pieces=1, seed=5))
+    frame = np.array([[0.10, 0.0], [-0.12, 0.0]])
+    twin.update(0.0, frame)
+    twin._start_window(0.0)
+    assert twin._smoother is not None and len(twin._smoother) == 8 + 4
+    assert all(s.ids.tolist() == [0] for s in twin._smoother)
+    for t in (1 / 30, 2 / 30):
+        twin.update(t, frame)
+    assert [a.shape for a in twin._predicted] == [(8, 2)] * 2
+    assert [a.shape for a in twin._anomalies] == [(4, 2)] * 2
