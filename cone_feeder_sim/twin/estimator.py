@@ -239,7 +239,7 @@ def window_log_likelihood(residuals: np.ndarray, anomalies: np.ndarray, ids: np.
     return -0.5 * quadratic
 
 
-#: The members' parameters at one time: log d (M,) and mu_C (M,).
+#: The values of d and mu_C at one time: log d (P,) and mu_C (P,).
 Walk = tuple[np.ndarray, np.ndarray]
 
 
@@ -258,6 +258,11 @@ class Twin:
             raise ValueError(f'confirm must be at least 1, got {settings.confirm}')
         if settings.members < 2:
             raise ValueError(f'members must be at least 2, got {settings.members}')
+        if settings.particles < 2 or settings.smoother_pieces < 1:
+            raise ValueError(f'particles must be at least 2 and smoother_pieces at least 1, '
+                             f'got {settings.particles} and {settings.smoother_pieces}')
+        if not settings.sigma > 0.0:
+            raise ValueError(f'sigma must be positive, got {settings.sigma}')
         if not settings.loosen >= 1.0:
             raise ValueError(f'loosen must be at least 1, got {settings.loosen}')
         self.params, self.settings = loosened(params, settings.loosen), settings
@@ -283,14 +288,14 @@ class Twin:
         self._left: list[Exit] = []
         self._drifted = t0
         #: the window: its start (s); the smoother's members (None: nothing to weigh), run
-        #: alongside the twin's: one state holding P copies of each piece (id * P + k: the
-        #: k-th value's), or, where pieces touch (contact on), one state per value; their
-        #: predictions of the window's detections so far, (P, k) per frame, and those
-        #: detections (k,) (m, x and y of each piece)
+        #: alongside the twin's: one state holding Q = P + M copies of each piece (id * Q +
+        #: k: the k-th value's, then each member's start), or, where pieces touch (contact
+        #: on), one state per copy; their predictions of the window's detections so far,
+        #: (P, k) per frame, and those detections (k,) (m, x and y of each piece)
         self._window_t0 = t0
         self._smoother: list[SimState] | None = None
         #: the parameters' random walk over the window: (log d, mu_C) at its start and end
-        #: (M,) each; None: a step each frame (no window yet, or window 0)
+        #: (P,) each; None: a step each frame (no window yet, or window 0)
         self._walk: Walk | None = None  # where the window's random walk ends
         self._predicted: list[np.ndarray] = []
         self._observed: list[np.ndarray] = []
@@ -410,7 +415,7 @@ class Twin:
         return ids, xy.mean(axis=0), covariance
 
     def parameters(self) -> dict[str, tuple[float, float]]:
-        """Return the product's d and mu_C: (estimate, spread) each, over the members."""
+        """Return the product's d and mu_C: (estimate, spread) each, over the P values."""
         d = np.exp(self.log_d)
         return {'d': (float(d.mean()), float(d.std(ddof=1))),
                 'mu_C': (float(self.mu_c.mean()), float(self.mu_c.std(ddof=1)))}
@@ -580,7 +585,7 @@ class Twin:
         Weigh d and mu_C against the window's detections at once (:mod:`.particles`).
 
         The smoother's members ran over the window alongside the twin's, without analyses,
-        each with one member's parameters (:meth:`_start_window`); the likelihood of the
+        each with one of the values (:meth:`_start_window`); the likelihood of the
         window's detections given its predictions weighs them, and the values are resampled,
         jittered and put in a random order: the members take the first of them.
         Measured against the frame-by-frame Kalman update of the parameters (window 0) and
@@ -621,8 +626,9 @@ class Twin:
         (pieces that stick), the weights a lottery, and the parameters drift (mu_C to 0.98
         +- 0.04 for a truth of 0.7, benchmarks/twin_identify.py at 6 rad/s). They run frame
         by frame with the twin's members (:meth:`predict`), so that no frame carries the
-        whole window's run. Only the pieces every member holds now, and still holds at a
-        frame, count; of them the ``smoother_pieces`` that slide fastest relative to the cone
+        whole window's run. Only the pieces every member holds now, and every copy still
+        holds at a frame, count (a piece that leaves in one copy no longer counts for any:
+        the value whose copy left wrongly goes unpunished); of them the ``smoother_pieces`` that slide fastest relative to the cone
         in the members' mean (ties: the older). M more smoother members run from each
         member's own state with the values' mean d and mu_C: how their predictions spread is
         what the mean start's error does to the smoother's, which the likelihood integrates
@@ -644,6 +650,8 @@ class Twin:
         sliding = np.mean([np.linalg.norm(s.y[self._rows(s, held), 3:6], axis=1)
                            for s in self.states], axis=0)
         held = np.sort(held[np.argsort(-sliding, kind='stable')[:self.settings.smoother_pieces]])
+        if not len(held):  # every member holds pieces, but not one the same: nothing to weigh
+            return
         base = remove_particles(first, sorted(set(first.ids.tolist()) - set(held.tolist())))
         rows = np.stack([s.y[self._rows(s, base.ids)] for s in self.states])
         # the P values from the members' mean start, then each member's start with the

@@ -24,7 +24,8 @@ from dataclasses import replace
 from cone_feeder_sim.physics.params import ModelParams, P_D
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
-    add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
+    add_particles, advance, remove_particles, resting_height, SimParams, SimState,
+    world_from_cone)
 from cone_feeder_sim.twin.estimator import (
     Frame, parameter_note, STILL, Twin, TwinSettings, weighed_values, window_log_likelihood)
 import numpy as np
@@ -197,18 +198,18 @@ def test_a_window_weighs_the_values_of_d_and_mu_c_by_the_fastest_sliding_pieces(
     settings = TwinSettings(members=4, particles=16, smoother_pieces=2, sigma=0.001, seed=3)
     twin = Twin(PARAMS, settings)
     assert len(twin.log_d) == len(twin.mu_c) == weighed_values(settings) == 16
-    # three pieces at rest on a cone at rest, the middle one given a slide in every member
+    # three pieces at rest on a cone at rest, the youngest given a slide in every member
     twin.update(0.0, np.array([[0.10, 0.0], [0.0, 0.11], [-0.12, 0.0]]))
     twin.states = [replace(s, y=s.y.copy()) for s in twin.states]
     for state in twin.states:
-        state.y[1, 3:5] = [0.05, 0.0]
+        state.y[2, 3:5] = [0.05, 0.0]
     twin._start_window(0.0)
     # one state (no contact): of the slider and of the older of the others, 16 copies from
     # the members' mean (one per value), then 4 from each member's start (the values' mean)
     assert twin._smoother is not None and len(twin._smoother) == 1
     copies = twin._smoother[0]
-    assert copies.ids.tolist() == [*range(20), *range(20, 40)]  # piece * 20 + copy
-    starts = np.stack([s.y[:2] for s in twin.states])
+    assert copies.ids.tolist() == [*range(20), *range(40, 60)]  # piece * 20 + copy
+    starts = np.stack([s.y[[0, 2]] for s in twin.states])
     for k in range(16):  # each with its value of d
         assert np.all(copies.products[[k, 20 + k], P_D]
                       == pytest.approx(np.exp(twin._walk[0][k])))
@@ -220,9 +221,9 @@ def test_a_window_weighs_the_values_of_d_and_mu_c_by_the_fastest_sliding_pieces(
     # the copies predict what one state per copy predicts (the layout for contact), bit for
     # bit: pieces apart are integrated alike in either
     apart = twin.snapshot()
-    apart._smoother = [replace(copies, y=copies.y[[k, 20 + k]], ids=np.array([0, 1]),
+    apart._smoother = [replace(copies, y=copies.y[[k, 20 + k]], ids=np.array([0, 2]),
                                products=copies.products[[k, 20 + k]],
-                               step_size=copies.step_size[[k, 20 + k]], next_id=2)
+                               step_size=copies.step_size[[k, 20 + k]], next_id=3)
                        for k in range(20)]
     for t in (1 / 30, 2 / 30):
         frame = np.array([[0.10, 0.0], [0.0, 0.11], [-0.12, 0.0]])
@@ -255,3 +256,38 @@ def test_with_the_pair_law_on_each_smoother_member_is_a_state_of_its_own() -> No
         twin.update(t, frame)
     assert [a.shape for a in twin._predicted] == [(8, 2)] * 2
     assert [a.shape for a in twin._anomalies] == [(4, 2)] * 2
+
+
+def test_a_window_without_a_piece_every_member_holds_weighs_nothing() -> None:
+    twin = Twin(PARAMS, TwinSettings(members=2, particles=4, sigma=0.001, seed=1))
+    twin.update(0.0, np.array([[0.10, 0.0], [-0.12, 0.0]]))
+    twin.states = [remove_particles(s, [k]) for k, s in enumerate(twin.states)]  # one each
+    twin._start_window(0.0)
+    assert twin._smoother is None
+
+
+def test_the_window_weighs_its_values_with_the_start_s_error_integrated_out(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    calls = []
+
+    def spy(residuals, anomalies, ids, sigma):  # noqa: ANN001, ANN202 - the function's own
+        calls.append((residuals.shape, anomalies.shape, ids.shape, sigma))
+        return window_log_likelihood(residuals, anomalies, ids, sigma)
+
+    monkeypatch.setattr('cone_feeder_sim.twin.estimator.window_log_likelihood', spy)
+    twin = Twin(PARAMS, TwinSettings(members=4, particles=8, sigma=0.001, window=0.1, seed=1))
+    for k in range(7):  # a window from 0 to 0.1 s: frames at 1/30 .. 3/30 s, weighed at 0.1 s
+        twin.update(k / 30.0, np.array([[0.10, 0.0], [-0.12, 0.0]]))
+    (residuals, anomalies, ids, sigma), *_ = calls
+    assert residuals[0] == 8 and anomalies[0] == 4 and residuals[1] == anomalies[1] == ids[0]
+    assert sigma == 0.001
+
+
+@pytest.mark.parametrize('settings, fragment', [
+    ({'particles': 1}, 'particles must be at least 2'),
+    ({'smoother_pieces': 0}, 'smoother_pieces at least 1'),
+    ({'sigma': 0.0}, 'sigma must be positive'),
+])
+def test_settings_out_of_range_are_refused(settings: dict, fragment: str) -> None:
+    with pytest.raises(ValueError, match=fragment):
+        Twin(PARAMS, TwinSettings(**settings))
