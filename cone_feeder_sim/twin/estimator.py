@@ -628,11 +628,11 @@ class Twin:
         by frame with the twin's members (:meth:`predict`), so that no frame carries the
         whole window's run. Only the pieces every member holds now, and every copy still
         holds at a frame, count (a piece that leaves in one copy no longer counts for any:
-        the value whose copy left wrongly goes unpunished); of them the ``smoother_pieces`` that slide fastest relative to the cone
-        in the members' mean (ties: the older). M more smoother members run from each
-        member's own state with the values' mean d and mu_C: how their predictions spread is
-        what the mean start's error does to the smoother's, which the likelihood integrates
-        out (:func:`window_log_likelihood`).
+        the value whose copy left wrongly goes unpunished); of them the ``smoother_pieces``
+        that slide fastest relative to the cone in the members' mean (ties: the older). M
+        more smoother members run from each member's own state with the values' mean d and
+        mu_C: how their predictions spread is what the mean start's error does to the
+        smoother's, which the likelihood integrates out (:func:`window_log_likelihood`).
         """
         self._window_t0, self._predicted, self._observed = t, [], []
         self._observed_ids, self._anomalies = [], []
