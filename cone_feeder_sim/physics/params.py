@@ -395,7 +395,12 @@ class ModelParams:
         return self.r * math.tan(math.radians(self.cone_tilt))
 
     def global_row(self) -> np.ndarray:
-        """Return the kernel's global array, shape (GLOBAL_WIDTH,), float64."""
+        """
+        Return the kernel's global array, shape (GLOBAL_WIDTH,), float64, read-only.
+
+        Read-only wherever it is made: numba compiles (and caches) a kernel per kind of
+        array, so a writable row passed anywhere would compile the kernels a second time.
+        """
         row = np.zeros(GLOBAL_WIDTH, dtype=np.float64)
         row[G_R] = self.r
         row[G_H] = self.h
@@ -405,6 +410,7 @@ class ModelParams:
         row[G_TIP_EPS] = self.tip_epsilon
         row[G_LITERAL] = 1.0 if self.normal_force == 'literal' else 0.0
         row[G_TANGENTIAL] = 1.0 if self.friction_direction == 'tangential' else 0.0
+        row.setflags(write=False)
         return row
 
 

@@ -69,9 +69,8 @@ class SimParams:
 
     def __post_init__(self) -> None:
         """Derive the kernel arrays."""
-        machine = self.model.global_row()
+        machine = self.model.global_row()  # read-only
         atol = self.solver.atol_row()
-        machine.setflags(write=False)
         atol.setflags(write=False)
         object.__setattr__(self, 'global_row', machine)
         object.__setattr__(self, 'atol', atol)
