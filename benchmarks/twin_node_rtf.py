@@ -24,6 +24,7 @@ p95 and the largest latency from a frame's arrival to the publication of its est
 the association rate and the pieces followed::
 
     .venv/bin/python benchmarks/twin_node_rtf.py [--pieces 30 60] [--members 4 8 16]
+        [--twin-parameters 'smoother_pieces:=6' 'smoother_pieces:=2']
         [--forecast-period 0.1] [--forecast-thread true false]
 """
 
@@ -60,7 +61,8 @@ def stop(proc: subprocess.Popen) -> None:
         proc.kill()
 
 
-def case(pieces: int, members: int, period: float, domain: int, thread: bool) -> None:
+def case(pieces: int, members: int, period: float, domain: int, thread: bool,
+         extra: str = '') -> None:
     """Run the plant and a twin of M members; print the figures of the last 15 s."""
     rng = np.random.default_rng(pieces)
     r = np.sqrt(rng.uniform(0.05 ** 2, 0.17 ** 2, pieces))
@@ -76,7 +78,8 @@ def case(pieces: int, members: int, period: float, domain: int, thread: bool) ->
     twin = start([str(BIN / 'twin_node'), '--ros-args', '-r', 'detections:=particle_states',
                   '-p', "record_path:=''", '-p', f'members:={members}',
                   '-p', f'forecast_period:={period}',
-                  '-p', f'forecast_thread:={str(thread).lower()}'], domain)
+                  '-p', f'forecast_thread:={str(thread).lower()}',
+                  *(part for item in extra.split() for part in ('-p', item))], domain)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node('twin_bench', context=context)
@@ -111,7 +114,8 @@ def case(pieces: int, members: int, period: float, domain: int, thread: bool) ->
     capacity = [float(row['real-time factor (capacity)']) for row in rows[1:]]
     association = [float(row['association rate']) for row in rows[1:]]
     states = sorted({row['state'] for row in rows})
-    print(f'N = {pieces}, M = {members}, forecasts every {period:g} s '
+    print(f'N = {pieces}, M = {members}{", " + extra if extra else ""}, forecasts every '
+          f'{period:g} s '
           f'({"on their own thread" if thread else "in turn"}): '
           f'{frames / wall:.1f} frames/s taken (of 30), RTF {frames / wall / 30:.3f}, '
           f'capacity {np.median(capacity):.2f} (median), latency p95 {np.nanmedian(p95):.1f} ms '
@@ -128,13 +132,17 @@ def main() -> None:
     parser.add_argument('--forecast-period', type=float, default=0.1)
     parser.add_argument('--forecast-thread', nargs='+', default=['true'],
                         choices=['true', 'false'], help='twin_node forecast_thread values')
+    parser.add_argument('--twin-parameters', nargs='+', default=[''],
+                        help="twin_node parameters of each run in turn ('name:=value ...')")
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     domain = 40 + os.getpid() % 50
     for pieces in args.pieces:
         for members in args.members:
             for thread in args.forecast_thread:
-                case(pieces, members, args.forecast_period, domain, thread == 'true')
+                for extra in args.twin_parameters:
+                    case(pieces, members, args.forecast_period, domain, thread == 'true',
+                         extra)
     print(calibration_line(), flush=True)
 
 
