@@ -480,7 +480,7 @@ SWEEP_INSTALL = ('the sweep runs on Dask, which is not installed; install it wit
 
 def cmd_twin(args: argparse.Namespace, err: TextIO) -> int:
     """Run the twin over a twin file's recorded streams; write its CSVs."""
-    from .twin.estimator import parameter_note, TwinSettings
+    from .twin.estimator import parameter_note
     from .twin.run import run_twin
     from .twin.spec import load_twin
 
@@ -494,7 +494,7 @@ def cmd_twin(args: argparse.Namespace, err: TextIO) -> int:
     err.write(f'{summary.frames} frames ({summary.refused} refused), {summary.forecasts} '
               f'forecasts; NIS {summary.nis:.1f} for {summary.observed} observations; '
               f'{span:.2f} s of stream in {wall:.2f} s; written to {out}\n')
-    if note := parameter_note(TwinSettings(members=spec.members, **spec.tuning)):
+    if note := parameter_note(spec.settings()):
         err.write(f'{note}\n')
     return 0
 

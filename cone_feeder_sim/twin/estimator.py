@@ -79,7 +79,7 @@ ANALYSED = np.array([0, 1, 3, 4, 6, 7])
 #: The fewest values of d and mu_C a window weighs whose spread was measured to hold
 #: (benchmarks/twin_identify.py, doc/twin.md): each member weighing its own, 32 members had all
 #: 16 cases within 3 spreads, 8 members 5 cases beyond, 4 members 7 (one 22.6 spreads off);
-#: 32 values with 4 or 8 members, 1 of 48 cases each (seeds 1-3).
+#: 32 values with 4 members 0 of 48 cases, with 8 members 2 of 48 (seeds 1-3).
 CALIBRATED_PARTICLES = 32
 #: A piece moving slower than this relative to the cone (m/s) rides with it. One that rides
 #: in every member has its position alone analysed (:meth:`Twin._analyse`); a forecast takes

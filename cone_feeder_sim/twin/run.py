@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .estimator import Twin, TwinSettings
+from .estimator import Twin
 from .figure import write_report
 from .forecast import forecast
 from .frames import detection_frame
@@ -83,11 +83,8 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
     """
     out.mkdir(parents=True, exist_ok=True)
     scenario = spec.scenario
-    product = scenario.model.product
     firsts = [table[0, 0] for table in (spec.detections, spec.cone) if len(table)]
-    twin = Twin(SimParams(model=scenario.model, solver=scenario.solver),
-                TwinSettings(members=spec.members, sigma=spec.sigma, d=product.d,
-                             mu_C=product.mu_C, seed=spec.seed, **spec.tuning),
+    twin = Twin(SimParams(model=scenario.model, solver=scenario.solver), spec.settings(),
                 t0=float(min(firsts, default=0.0)))
     stamps, starts = np.unique(spec.detections[:, 0], return_index=True)
     ends = list(starts[1:]) + [len(spec.detections)]

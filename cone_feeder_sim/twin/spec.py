@@ -84,6 +84,12 @@ class TwinSpec:
     seed: int = 0
     tuning: dict[str, float] = field(default_factory=dict)
 
+    def settings(self) -> TwinSettings:
+        """Return the estimator's settings: the file's, the scenario's product as the prior."""
+        product = self.scenario.model.product
+        return TwinSettings(members=self.members, sigma=self.sigma, d=product.d,
+                            mu_C=product.mu_C, seed=self.seed, **self.tuning)
+
 
 def _rows(path: Path, columns: tuple[str, ...], optional: tuple[str, ...]) -> np.ndarray:
     """Read a CSV's columns (missing optional ones and empty cells: NaN), sorted by t."""
