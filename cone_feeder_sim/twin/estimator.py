@@ -303,6 +303,9 @@ class Twin:
         #: predicted from each member's start (M, k), minus their mean (m)
         self._observed_ids: list[np.ndarray] = []
         self._anomalies: list[np.ndarray] = []
+        #: where the smoother's copies of pieces left the cone this window: (index of the
+        #: smoother's state, id in it) -> world x, y (2,) (m) at the exit
+        self._departed: dict[tuple[int, int], np.ndarray] = {}
 
     def snapshot(self) -> 'Twin':
         """Return a copy that goes on apart from this twin (its random numbers included)."""
@@ -317,6 +320,7 @@ class Twin:
         other._smoother = None if self._smoother is None else list(self._smoother)
         other._predicted, other._observed = list(self._predicted), list(self._observed)
         other._observed_ids, other._anomalies = list(self._observed_ids), list(self._anomalies)
+        other._departed = dict(self._departed)
         return other
 
     @property
@@ -375,6 +379,9 @@ class Twin:
         results = self.advance(self.states + smoother, t1)  # one compiled call for both
         if smoother:
             self._smoother = [r.state for r in results[m:]]
+            for k, r in enumerate(results[m:]):
+                for i, xy in zip(r.exits.ids.tolist(), r.exits.position[:, :2]):
+                    self._departed[(k, i)] = xy
             results = results[:m]
         self.states = [r.state for r in results]
         gone: dict[int, int] = {}
@@ -626,16 +633,16 @@ class Twin:
         (pieces that stick), the weights a lottery, and the parameters drift (mu_C to 0.98
         +- 0.04 for a truth of 0.7, benchmarks/twin_identify.py at 6 rad/s). They run frame
         by frame with the twin's members (:meth:`predict`), so that no frame carries the
-        whole window's run. Only the pieces every member holds now, and every copy still
-        holds at a frame, count (a piece that leaves in one copy no longer counts for any:
-        the value whose copy left wrongly goes unpunished); of them the ``smoother_pieces``
+        whole window's run. Only the pieces every member holds now count; of them the
+        ``smoother_pieces``
         that slide fastest relative to the cone in the members' mean (ties: the older). M
         more smoother members run from each member's own state with the values' mean d and
         mu_C: how their predictions spread is what the mean start's error does to the
         smoother's, which the likelihood integrates out (:func:`window_log_likelihood`).
+        A copy whose piece left the cone predicts it where it left (:meth:`_window_frame`).
         """
         self._window_t0, self._predicted, self._observed = t, [], []
-        self._observed_ids, self._anomalies = [], []
+        self._observed_ids, self._anomalies, self._departed = [], [], {}
         self._smoother = None
         self._drifted = t
         scale = self.settings.drift * math.sqrt(self.settings.window)
@@ -672,28 +679,50 @@ class Twin:
             step_size=np.repeat(base.step_size, q), next_id=(int(base.ids.max()) + 1) * q)]
 
     def _window_frame(self, t: float, ids: np.ndarray, xy: np.ndarray) -> None:
-        """Add the smoother's predictions of a frame's associated detections (ids, xy)."""
+        """
+        Add the smoother's predictions of a frame's associated detections (ids, xy).
+
+        A piece counts while some copy of it is on the cone. A copy whose piece left
+        predicts it where it left: a value that made a piece leave while the camera still
+        sees it is weighed by how far the piece is from that point. (Dropped from the
+        likelihood instead, as before, such a value went unpunished: the piece stopped
+        counting for every value.)
+        """
         if self._smoother is None:
             return
         omega = self._profile.omega(t)
         p, q = len(self.log_d), len(self.log_d) + len(self.states)
         if len(self._smoother) == 1:  # the copies of each piece in one state (q >= 4)
             state = self._smoother[0]
-            copies = ids[:, None] * q + np.arange(q)
-            whole = np.all(np.isin(copies, state.ids), axis=1)
-            held = ids[whole]
-            rows = np.searchsorted(state.ids, copies[whole].ravel())
-            at, _, _ = world_from_cone(state.y[rows], state.angle, omega)
-            predicted = at[:, :2].reshape(len(held), q, 2).transpose(1, 0, 2).reshape(q, -1)
+            copies = ids[:, None] * q + np.arange(q)  # (n, q)
+            present = np.isin(copies, state.ids)
+            left = np.array([[(0, c) in self._departed for c in row] for row in
+                             copies.tolist()], dtype=bool).reshape(copies.shape)
+            counted = np.all(present | left, axis=1) & np.any(present, axis=1)
+            held, copies, present = ids[counted], copies[counted], present[counted]
+            at = np.empty((len(held), q, 2))
+            rows = np.searchsorted(state.ids, copies[present])
+            at[present] = world_from_cone(state.y[rows], state.angle, omega)[0][:, :2]
+            for a, b in zip(*np.nonzero(~present)):
+                at[a, b] = self._departed[(0, int(copies[a, b]))]
+            predicted = at.transpose(1, 0, 2).reshape(q, -1)
         else:
-            held = ids[np.all([np.isin(ids, s.ids) for s in self._smoother], axis=0)]
-            predicted = np.stack([self._world(s, held, omega)[:, :2].ravel()
-                                  for s in self._smoother])
+            present = np.array([np.isin(ids, s.ids) for s in self._smoother])  # (q, n)
+            left = np.array([[(k, i) in self._departed for i in ids.tolist()]
+                             for k in range(q)], dtype=bool).reshape(present.shape)
+            counted = np.all(present | left, axis=0) & np.any(present, axis=0)
+            held, present = ids[counted], present[:, counted]
+            at = np.empty((q, len(held), 2))
+            for k, s in enumerate(self._smoother):
+                at[k, present[k]] = self._world(s, held[present[k]], omega)[:, :2]
+                for j in np.nonzero(~present[k])[0]:
+                    at[k, j] = self._departed[(k, int(held[j]))]
+            predicted = at.reshape(q, -1)
         if not len(held):
             return
         self._predicted.append(predicted[:p])
         self._anomalies.append(predicted[p:] - predicted[p:].mean(axis=0))
-        self._observed.append(xy[np.isin(ids, held)].ravel())
+        self._observed.append(xy[counted].ravel())
         self._observed_ids.append(np.repeat(held, 2))
 
     def _product(self, member: int, mass: float, parameters: Walk | None = None) -> ProductParams:

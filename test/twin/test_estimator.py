@@ -234,6 +234,48 @@ def test_a_window_weighs_the_values_of_d_and_mu_c_by_the_fastest_sliding_pieces(
         assert a.shape in ((16, 4), (4, 4)) and np.array_equal(a, b)
 
 
+def test_a_value_that_sends_a_seen_piece_off_the_cone_is_weighed_where_it_left() -> None:
+    twin = Twin(PARAMS, TwinSettings(members=4, particles=8, smoother_pieces=1, sigma=0.001,
+                                     seed=2))
+    place = np.array([[0.20, 0.0]])  # at rest near the rim (0.225 m), the cone at rest
+    twin.update(0.0, place)
+    twin._start_window(0.0)
+    assert twin._smoother is not None and len(twin._smoother) == 1
+    copies = twin._smoother[0]
+    assert copies.ids.tolist() == list(range(12))  # 8 values, then 4 members' starts
+    # the same copies one state each (the layout for contact): the same predictions
+    apart = twin.snapshot()
+    apart._smoother = [replace(copies, y=copies.y[[k]], ids=np.array([0]),
+                               products=copies.products[[k]],
+                               step_size=copies.step_size[[k]], next_id=1)
+                       for k in range(12)]
+    # the copies of values 0 and 1 are sent outwards at 1 m/s: they leave within a frame
+    for smoother, rows in ((twin._smoother, [(0, 0), (0, 1)]),
+                           (apart._smoother, [(0, 0), (1, 0)])):
+        for state, row in rows:
+            smoother[state] = replace(smoother[state], y=smoother[state].y.copy())
+            smoother[state].y[row, 3:5] = [1.0, 0.0]
+    for t in (1 / 30, 2 / 30, 3 / 30):
+        twin.update(t, place)  # the camera still sees the piece where it was
+        apart.update(t, place)
+    assert twin._smoother[0].count == 10 and len(twin._departed) == 2
+    # the piece still counts: the values whose copy left predict it where it left
+    assert [a.shape for a in twin._predicted] == [(8, 2)] * 3
+    left = np.array([twin._departed[(0, 0)], twin._departed[(0, 1)]])
+    assert np.hypot(*left.T) == pytest.approx([MODEL.r] * 2, abs=1e-6)
+    assert np.array_equal(twin._predicted[-1][:2], left)
+    for predicted in twin._predicted:
+        assert np.all(np.hypot(*predicted[:2].T) > 0.215)  # on the way or gone
+        assert np.all(np.abs(predicted[2:] - place) < 0.002)  # where it is seen
+    for a, b in zip(twin._predicted + twin._anomalies, apart._predicted + apart._anomalies):
+        assert np.array_equal(a, b)
+    # and are weighed down by it
+    log_likelihood = window_log_likelihood(
+        np.concatenate(twin._predicted, axis=1) - np.concatenate(twin._observed),
+        np.concatenate(twin._anomalies, axis=1), np.concatenate(twin._observed_ids), 0.001)
+    assert np.max(log_likelihood[:2]) < np.min(log_likelihood[2:]) - 100.0
+
+
 def test_the_note_names_too_few_values_of_d_and_mu_c() -> None:
     assert parameter_note(TwinSettings(members=4)) == ''  # 32 values, whatever the members
     assert '8 values of d and mu_C' in parameter_note(TwinSettings(members=4, particles=8))
