@@ -27,7 +27,9 @@ from cone_feeder_sim.physics.simulation import (
     add_particles, advance, remove_particles, resting_height, SimParams, SimState,
     world_from_cone)
 from cone_feeder_sim.twin.estimator import (
-    Frame, parameter_note, STILL, Twin, TwinSettings, weighed_values, window_log_likelihood)
+    Frame, MISSED_FRAME, parameter_note, STILL, Twin, TwinSettings, weighed_values,
+    window_log_likelihood)
+from cone_feeder_sim.twin.particles import resample_parameters
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -274,6 +276,33 @@ def test_a_value_that_sends_a_seen_piece_off_the_cone_is_weighed_where_it_left()
         np.concatenate(twin._predicted, axis=1) - np.concatenate(twin._observed),
         np.concatenate(twin._anomalies, axis=1), np.concatenate(twin._observed_ids), 0.001)
     assert np.max(log_likelihood[:2]) < np.min(log_likelihood[2:]) - 100.0
+
+
+def test_a_value_that_keeps_a_piece_the_camera_no_longer_sees_is_weighed_down(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    twin = Twin(PARAMS, TwinSettings(members=4, particles=8, smoother_pieces=1, sigma=0.001,
+                                     confirm=1, seed=2))
+    twin.update(0.0, np.array([[0.20, 0.0]]))  # at rest near the rim, the cone at rest
+    twin._start_window(0.0)
+    copies = twin._smoother[0]
+    twin._smoother = [replace(copies, y=copies.y.copy())]
+    twin._smoother[0].y[:2, 3:5] = [1.0, 0.0]  # the copies of values 0 and 1 leave
+    nothing = np.zeros((0, 2))
+    for k in range(1, 5):  # and the camera sees the piece no more
+        twin.update(k / 30, nothing)
+    assert twin.pieces()[0].tolist() == [0] and len(twin._departed) == 2
+    # every frame costs the values whose copy holds the piece; those whose copy left, less
+    assert np.all(twin._missed[2:] == 4 * MISSED_FRAME)
+    assert np.all(twin._missed[:2] >= 3 * MISSED_FRAME)
+    weighed = []
+
+    def spy(parameters, log_likelihood, rng):  # noqa: ANN001, ANN202 - the function's own
+        weighed.append(log_likelihood)
+        return resample_parameters(parameters, log_likelihood, rng)
+
+    monkeypatch.setattr('cone_feeder_sim.twin.estimator.resample_parameters', spy)
+    twin._smooth()  # no detection in the window: the frames it missed weigh alone
+    assert len(weighed) == 1 and np.array_equal(weighed[0], twin._missed)
 
 
 def test_the_note_names_too_few_values_of_d_and_mu_c() -> None:
