@@ -21,10 +21,12 @@ contact between pieces, no node nor the command loads scipy's optimisers, statis
 KD-tree.
 """
 
+import os
 from pathlib import Path
 import subprocess
 import sys
 
+from cone_feeder_sim.ros import BLAS_THREADS
 from cone_feeder_sim.ros.parameters import warn_unknown_parameters
 from cone_feeder_sim.ros.sim_node import SimNode
 import pytest
@@ -92,3 +94,39 @@ def test_the_nodes_and_the_command_start_without_the_heavy_parts_of_scipy() -> N
     assert all(loaded[step] == '' for step in steps), loaded
     # the twin assigns detections with scipy's optimiser, and needs no statistics
     assert 'scipy.optimize' in loaded[twin] and 'scipy.stats' not in loaded[twin], loaded
+
+
+#: Imports sys.argv[1], then numpy; prints the threads of the OpenBLAS loaded (-1: none).
+BLAS = """
+import ctypes, importlib, sys
+importlib.import_module(sys.argv[1])
+import numpy
+found = -1
+for path in sorted({line.split()[-1] for line in open('/proc/self/maps')
+                    if 'openblas' in line.lower()}):
+    lib = ctypes.CDLL(path)
+    for name in ('scipy_openblas_get_num_threads64_', 'openblas_get_num_threads64_',
+                 'openblas_get_num_threads'):
+        if hasattr(lib, name):
+            found = getattr(lib, name)()
+print(found)
+"""
+
+
+def test_a_node_runs_blas_on_one_thread_unless_told_otherwise() -> None:
+    clean = {key: value for key, value in os.environ.items() if key not in BLAS_THREADS}
+
+    def threads(module: str, **env: str) -> int:
+        done = subprocess.run([sys.executable, '-c', BLAS, module], capture_output=True,
+                              text=True, timeout=120, env={**clean, **env})
+        assert done.returncode == 0, done.stderr
+        return int(done.stdout)
+
+    plain = threads('json')
+    if plain == -1:
+        pytest.skip('this numpy loads no OpenBLAS')
+    assert threads('cone_feeder_sim.ros.twin_node') == 1
+    assert threads('cone_feeder_sim.ros.sim_node') == 1
+    if (os.cpu_count() or 1) > 1:  # else the plain import is on one thread too
+        assert plain > 1
+        assert threads('cone_feeder_sim.ros.twin_node', OPENBLAS_NUM_THREADS='2') == 2
