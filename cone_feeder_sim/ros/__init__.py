@@ -26,6 +26,8 @@ and its cores are the simulation's: beside sim_node on two cores, OpenBLAS's thr
 for cores the kernels held, and twin_node at 60 pieces took 1.25 and 1.15 s of stream per
 second of computing, p95 latency 159 and 246 ms, against 1.85 and 1.82, 69 and 73 ms on one
 thread (benchmarks/twin_node_rtf.py, doc/twin.md). A variable set in the environment wins.
+A process that loaded numpy before importing this package keeps its BLAS threads; one that
+imports it first (a notebook using ``ros.parameters``) gets one, and so do its children.
 """
 
 import os

@@ -239,9 +239,10 @@ def window_log_likelihood(residuals: np.ndarray, anomalies: np.ndarray, ids: np.
     return -0.5 * quadratic
 
 
-#: The log-likelihood, for a value of d and mu_C, of a frame in which the camera does not
-#: see a piece that the value's smoother copy holds on the cone: a camera that misses a piece
-#: in one frame of ten. (A copy whose piece left, in the same frame: 0.) Without it only a
+#: The log-likelihood, for a value of d and mu_C, of a frame in which no detection is
+#: associated with a piece that the twin follows and the value's smoother copy holds on the
+#: cone: a camera that misses a piece in one frame of ten. (A copy whose piece left, in the
+#: same frame: 0.) Without it only a
 #: piece that left too early was evidence, and not one that stayed too long: the weights
 #: leaned to values that keep pieces on the cone (benchmarks/twin_forecast_scores.py, seeds
 #: 1-3: channel-mass error over 1 s 0.287, 0.291, 0.288 kg, with it 0.276, 0.275, 0.273).
@@ -474,7 +475,7 @@ class Twin:
                     self.tracks[i] = int(track_ids[seen])
                 self.last_seen[i] = t
                 self.hits[i] = min(self.hits.get(i, 0) + 1, self.settings.confirm)
-        self._window_frame(t, ids[match.pairs[:, 0]], detections[match.pairs[:, 1], :2])
+        self._window_frame(t, ids[match.pairs[:, 0]], detections[match.pairs[:, 1], :2], ids)
         # a detection left over is a birth, unless it is within 3 sigma of the rim (a piece
         # leaving, or a false detection there: no member could hold it on the cone)
         rim = self.params.model.r - 3.0 * sigma
@@ -607,7 +608,9 @@ class Twin:
         The smoother's members ran over the window alongside the twin's, without analyses,
         each with one of the values (:meth:`_start_window`); the likelihood of the
         window's detections given its predictions weighs them, and the values are resampled,
-        jittered and put in a random order: the members take the first of them.
+        jittered and put in a random order: the members take the first of them. The frames
+        that missed a piece some copies kept add theirs (:data:`MISSED_FRAME`); a window
+        without either keeps its values as they are.
         Measured against the frame-by-frame Kalman update of the parameters (window 0) and
         a linear ensemble smoother over the window (tried, not kept): doc/twin.md.
         """
@@ -649,10 +652,9 @@ class Twin:
         +- 0.04 for a truth of 0.7, benchmarks/twin_identify.py at 6 rad/s). They run frame
         by frame with the twin's members (:meth:`predict`), so that no frame carries the
         whole window's run. Only the pieces every member holds now count; of them the
-        ``smoother_pieces``
-        that slide fastest relative to the cone in the members' mean (ties: the older). M
-        more smoother members run from each member's own state with the values' mean d and
-        mu_C: how their predictions spread is what the mean start's error does to the
+        ``smoother_pieces`` that slide fastest relative to the cone in the members' mean
+        (ties: the older). M more smoother members run from each member's own state with the
+        values' mean d and mu_C: how their predictions spread is what the mean start's error does to the
         smoother's, which the likelihood integrates out (:func:`window_log_likelihood`).
         A copy whose piece left the cone predicts it where it left, and a frame that does not
         see a piece costs the values whose copy holds it (:meth:`_window_frame`).
@@ -697,16 +699,21 @@ class Twin:
             ids=(base.ids[:, None] * q + np.arange(q)).ravel(),
             step_size=np.repeat(base.step_size, q), next_id=(int(base.ids.max()) + 1) * q)]
 
-    def _window_frame(self, t: float, ids: np.ndarray, xy: np.ndarray) -> None:
+    def _window_frame(self, t: float, ids: np.ndarray, xy: np.ndarray,
+                      followed: np.ndarray) -> None:
         """
         Add the smoother's predictions of a frame's associated detections (ids, xy).
+
+        followed: the pieces the frame's detections were associated against (ids).
 
         A piece counts while some copy of it is on the cone. A copy whose piece left
         predicts it where it left: a value that made a piece leave while the camera still
         sees it is weighed by how far the piece is from that point. (Dropped from the
         likelihood instead, as before, such a value went unpunished: the piece stopped
-        counting for every value.) A piece of the window the frame does not see costs each
-        value whose copy still holds it :data:`MISSED_FRAME`.
+        counting for every value.) A piece of the window that the twin still follows and
+        that no detection was associated with costs each value whose copy still holds it
+        :data:`MISSED_FRAME`. (Not a piece the twin dropped: the camera may see it under
+        another id, and the values that kept it would pay for being right.)
         """
         if self._smoother is None:
             return
@@ -740,7 +747,7 @@ class Twin:
                 for j in np.nonzero(~present[k])[0]:
                     at[k, j] = self._departed[(k, int(held[j]))]
             predicted = at.reshape(q, -1)
-        unseen = np.setdiff1d(self._window_pieces, held)
+        unseen = np.setdiff1d(np.intersect1d(self._window_pieces, followed), ids)
         if len(unseen) and len(self._smoother) == 1:
             kept = np.isin(unseen[:, None] * q + np.arange(p), self._smoother[0].ids)
             self._missed += MISSED_FRAME * kept.sum(axis=0)

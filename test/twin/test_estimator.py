@@ -278,6 +278,18 @@ def test_a_value_that_sends_a_seen_piece_off_the_cone_is_weighed_where_it_left()
     assert np.max(log_likelihood[:2]) < np.min(log_likelihood[2:]) - 100.0
 
 
+def one_state_per_copy(twin: Twin) -> Twin:
+    """Return a copy of the twin whose smoother has each copy in a state of its own."""
+    (copies,) = twin._smoother
+    q = len(twin.log_d) + len(twin.states)
+    apart = twin.snapshot()
+    apart._smoother = [replace(copies, y=copies.y[k::q], ids=copies.ids[k::q] // q,
+                               products=copies.products[k::q],
+                               step_size=copies.step_size[k::q],
+                               next_id=int(copies.ids.max()) // q + 1) for k in range(q)]
+    return apart
+
+
 def test_a_value_that_keeps_a_piece_the_camera_no_longer_sees_is_weighed_down(
         monkeypatch: pytest.MonkeyPatch) -> None:
     twin = Twin(PARAMS, TwinSettings(members=4, particles=8, smoother_pieces=1, sigma=0.001,
@@ -287,13 +299,20 @@ def test_a_value_that_keeps_a_piece_the_camera_no_longer_sees_is_weighed_down(
     copies = twin._smoother[0]
     twin._smoother = [replace(copies, y=copies.y.copy())]
     twin._smoother[0].y[:2, 3:5] = [1.0, 0.0]  # the copies of values 0 and 1 leave
+    apart = one_state_per_copy(twin)  # the layout for contact
     nothing = np.zeros((0, 2))
     for k in range(1, 5):  # and the camera sees the piece no more
         twin.update(k / 30, nothing)
+        apart.update(k / 30, nothing)
     assert twin.pieces()[0].tolist() == [0] and len(twin._departed) == 2
     # every frame costs the values whose copy holds the piece; those whose copy left, less
     assert np.all(twin._missed[2:] == 4 * MISSED_FRAME)
     assert np.all(twin._missed[:2] >= 3 * MISSED_FRAME)
+    assert np.array_equal(apart._missed, twin._missed)
+    later = twin.snapshot()  # a rewind's copy goes on apart
+    later._missed += 1.0
+    later._departed.clear()
+    assert np.all(twin._missed[2:] == 4 * MISSED_FRAME) and len(twin._departed) == 2
     weighed = []
 
     def spy(parameters, log_likelihood, rng):  # noqa: ANN001, ANN202 - the function's own
@@ -303,6 +322,27 @@ def test_a_value_that_keeps_a_piece_the_camera_no_longer_sees_is_weighed_down(
     monkeypatch.setattr('cone_feeder_sim.twin.estimator.resample_parameters', spy)
     twin._smooth()  # no detection in the window: the frames it missed weigh alone
     assert len(weighed) == 1 and np.array_equal(weighed[0], twin._missed)
+
+
+def test_a_piece_the_twin_dropped_while_the_camera_sees_it_costs_no_value() -> None:
+    # the members send the piece off, the camera still sees it (born again under a new id):
+    # the values whose copy kept it were right, and must not pay for the twin's mistake
+    twin = Twin(PARAMS, TwinSettings(members=4, particles=8, smoother_pieces=1, sigma=0.001,
+                                     confirm=1, seed=2))
+    place = np.array([[0.20, 0.0]])
+    twin.update(0.0, place)
+    twin._start_window(0.0)
+    twin.states = [replace(s, y=s.y.copy()) for s in twin.states]
+    for state in twin.states:
+        state.y[0, 3:5] = [1.0, 0.0]
+    copies = twin._smoother[0]
+    twin._smoother = [replace(copies, y=copies.y.copy())]
+    twin._smoother[0].y[:2, 3:5] = [1.0, 0.0]  # and the copies of values 0 and 1
+    for k in range(1, 5):
+        twin.update(k / 30, place)
+    assert 0 not in twin.pieces(tentative=True)[0].tolist()  # dropped, then born again
+    assert len(twin.pieces(tentative=True)[0]) == 1
+    assert len(twin._departed) == 2 and np.all(twin._missed == 0.0)
 
 
 def test_the_note_names_too_few_values_of_d_and_mu_c() -> None:
