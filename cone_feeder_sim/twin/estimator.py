@@ -654,8 +654,9 @@ class Twin:
         whole window's run. Only the pieces every member holds now count; of them the
         ``smoother_pieces`` that slide fastest relative to the cone in the members' mean
         (ties: the older). M more smoother members run from each member's own state with the
-        values' mean d and mu_C: how their predictions spread is what the mean start's error does to the
-        smoother's, which the likelihood integrates out (:func:`window_log_likelihood`).
+        values' mean d and mu_C: how their predictions spread is what the mean start's error
+        does to the smoother's, which the likelihood integrates out
+        (:func:`window_log_likelihood`).
         A copy whose piece left the cone predicts it where it left, and a frame that does not
         see a piece costs the values whose copy holds it (:meth:`_window_frame`).
         """
