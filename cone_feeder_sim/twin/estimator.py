@@ -242,10 +242,10 @@ def window_log_likelihood(residuals: np.ndarray, anomalies: np.ndarray, ids: np.
 #: The log-likelihood, for a value of d and mu_C, of a frame in which no detection is
 #: associated with a piece that the twin follows and the value's smoother copy holds on the
 #: cone: a camera that misses a piece in one frame of ten. (A copy whose piece left, in the
-#: same frame: 0.) Without it only a
-#: piece that left too early was evidence, and not one that stayed too long: the weights
-#: leaned to values that keep pieces on the cone (benchmarks/twin_forecast_scores.py, seeds
-#: 1-3: channel-mass error over 1 s 0.287, 0.291, 0.288 kg, with it 0.276, 0.275, 0.273).
+#: same frame: 0.) Without it only a piece that left too early was evidence, and not one
+#: that stayed too long: the weights leaned to values that keep pieces on the cone
+#: (benchmarks/twin_forecast_scores.py, seeds 1-3: channel-mass error over 1 s 0.287, 0.291,
+#: 0.288 kg; with it 0.277, 0.275, 0.276).
 MISSED_FRAME = math.log(0.1)
 
 #: The values of d and mu_C at one time: log d (P,) and mu_C (P,).
