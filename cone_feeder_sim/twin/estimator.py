@@ -312,8 +312,9 @@ class Twin:
         #: predicted from each member's start (M, k), minus their mean (m)
         self._observed_ids: list[np.ndarray] = []
         self._anomalies: list[np.ndarray] = []
-        #: where the smoother's copies of pieces left the cone this window: (index of the
-        #: smoother's state, id in it) -> world x, y (2,) (m) at the exit
+        #: where the smoother's copies of pieces left the cone this window, or their
+        #: integration failed: (index of the smoother's state, id in it) -> world x, y (2,)
+        #: (m) there
         self._departed: dict[tuple[int, int], np.ndarray] = {}
         #: the pieces the window's smoother holds (ids), and the values' log-likelihood
         #: (P,) of the frames that did not see one of them (:data:`MISSED_FRAME`)
@@ -396,6 +397,12 @@ class Twin:
             for k, r in enumerate(results[m:]):
                 for i, xy in zip(r.exits.ids.tolist(), r.exits.position[:, :2]):
                     self._departed[(k, i)] = xy
+                for failure in r.failures:  # where it failed, or was last if not finite
+                    xy = np.array(failure.position[:2], dtype=float)
+                    if not np.all(np.isfinite(xy)):
+                        xy = self._world(smoother[k], np.array([failure.particle_id]),
+                                         0.0)[0, :2]
+                    self._departed[(k, failure.particle_id)] = xy
             results = results[:m]
         self.states = [r.state for r in results]
         gone: dict[int, int] = {}
@@ -708,13 +715,14 @@ class Twin:
         followed: the pieces the frame's detections were associated against (ids).
 
         A piece counts while some copy of it is on the cone. A copy whose piece left
-        predicts it where it left: a value that made a piece leave while the camera still
-        sees it is weighed by how far the piece is from that point. (Dropped from the
-        likelihood instead, as before, such a value went unpunished: the piece stopped
-        counting for every value.) A piece of the window that the twin still follows and
-        that no detection was associated with costs each value whose copy still holds it
-        :data:`MISSED_FRAME`. (Not a piece the twin dropped: the camera may see it under
-        another id, and the values that kept it would pay for being right.)
+        predicts it where it left (one whose integration failed, where it failed): a value
+        that made a piece leave while the camera still sees it is weighed by how far the
+        piece is from that point. (Dropped from the likelihood instead, as before, such a
+        value went unpunished: the piece stopped counting for every value.) A piece of the
+        window that the twin still follows and that no detection was associated with costs
+        each value whose copy still holds it :data:`MISSED_FRAME`. (Not a piece the twin
+        dropped: the camera may see it under another id, and the values that kept it would
+        pay for being right.)
         """
         if self._smoother is None:
             return

@@ -324,6 +324,25 @@ def test_a_value_that_keeps_a_piece_the_camera_no_longer_sees_is_weighed_down(
     assert len(weighed) == 1 and np.array_equal(weighed[0], twin._missed)
 
 
+def test_a_copy_whose_integration_fails_keeps_its_piece_counting_where_it_was() -> None:
+    twin = Twin(PARAMS, TwinSettings(members=4, particles=8, smoother_pieces=1, sigma=0.001,
+                                     confirm=1, seed=2))
+    place = np.array([[0.10, 0.0]])
+    twin.update(0.0, place)
+    twin._start_window(0.0)
+    copies = twin._smoother[0]
+    twin._smoother = [replace(copies, y=copies.y.copy())]
+    last, _, _ = world_from_cone(twin._smoother[0].y[[3]], copies.angle, 0.0)
+    twin._smoother[0].y[3, 3] = np.nan  # value 3's copy cannot be integrated
+    twin.update(1 / 30, place)
+    assert twin._smoother[0].count == 11
+    assert np.array_equal(twin._departed[(0, 3)], last[0, :2])  # where it last was
+    # the piece still counts for every value, value 3's copy where it was
+    assert [a.shape for a in twin._predicted] == [(8, 2)]
+    assert np.array_equal(twin._predicted[0][3], last[0, :2])
+    assert np.all(twin._missed == 0.0)
+
+
 def test_a_piece_the_twin_dropped_while_the_camera_sees_it_costs_no_value() -> None:
     # the members send the piece off, the camera still sees it (born again under a new id):
     # the values whose copy kept it were right, and must not pay for the twin's mistake
