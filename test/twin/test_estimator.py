@@ -278,6 +278,15 @@ def test_a_value_that_sends_a_seen_piece_off_the_cone_is_weighed_where_it_left()
     assert np.max(log_likelihood[:2]) < np.min(log_likelihood[2:]) - 100.0
 
 
+def one_piece_window(x: float) -> Twin:
+    """Return a twin (4 members, 8 values) of one piece seen at (x, 0), its window started."""
+    twin = Twin(PARAMS, TwinSettings(members=4, particles=8, smoother_pieces=1, sigma=0.001,
+                                     confirm=1, seed=2))
+    twin.update(0.0, np.array([[x, 0.0]]))
+    twin._start_window(0.0)
+    return twin
+
+
 def one_state_per_copy(twin: Twin) -> Twin:
     """Return a copy of the twin whose smoother has each copy in a state of its own."""
     (copies,) = twin._smoother
@@ -292,10 +301,7 @@ def one_state_per_copy(twin: Twin) -> Twin:
 
 def test_a_value_that_keeps_a_piece_the_camera_no_longer_sees_is_weighed_down(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    twin = Twin(PARAMS, TwinSettings(members=4, particles=8, smoother_pieces=1, sigma=0.001,
-                                     confirm=1, seed=2))
-    twin.update(0.0, np.array([[0.20, 0.0]]))  # at rest near the rim, the cone at rest
-    twin._start_window(0.0)
+    twin = one_piece_window(0.20)  # at rest near the rim, the cone at rest
     copies = twin._smoother[0]
     twin._smoother = [replace(copies, y=copies.y.copy())]
     twin._smoother[0].y[:2, 3:5] = [1.0, 0.0]  # the copies of values 0 and 1 leave
@@ -325,11 +331,7 @@ def test_a_value_that_keeps_a_piece_the_camera_no_longer_sees_is_weighed_down(
 
 
 def test_a_copy_whose_integration_fails_keeps_its_piece_counting_where_it_was() -> None:
-    twin = Twin(PARAMS, TwinSettings(members=4, particles=8, smoother_pieces=1, sigma=0.001,
-                                     confirm=1, seed=2))
-    place = np.array([[0.10, 0.0]])
-    twin.update(0.0, place)
-    twin._start_window(0.0)
+    twin, place = one_piece_window(0.10), np.array([[0.10, 0.0]])
     copies = twin._smoother[0]
     twin._smoother = [replace(copies, y=copies.y.copy())]
     last, _, _ = world_from_cone(twin._smoother[0].y[[3]], copies.angle, 0.0)
@@ -346,11 +348,7 @@ def test_a_copy_whose_integration_fails_keeps_its_piece_counting_where_it_was() 
 def test_a_piece_the_twin_dropped_while_the_camera_sees_it_costs_no_value() -> None:
     # the members send the piece off, the camera still sees it (born again under a new id):
     # the values whose copy kept it were right, and must not pay for the twin's mistake
-    twin = Twin(PARAMS, TwinSettings(members=4, particles=8, smoother_pieces=1, sigma=0.001,
-                                     confirm=1, seed=2))
-    place = np.array([[0.20, 0.0]])
-    twin.update(0.0, place)
-    twin._start_window(0.0)
+    twin, place = one_piece_window(0.20), np.array([[0.20, 0.0]])
     twin.states = [replace(s, y=s.y.copy()) for s in twin.states]
     for state in twin.states:
         state.y[0, 3:5] = [1.0, 0.0]
