@@ -730,45 +730,44 @@ class Twin:
         ids, xy = ids[inside], xy[inside]
         omega = self._profile.omega(t)
         p, q = len(self.log_d), len(self.log_d) + len(self.states)
-        if len(self._smoother) == 1:  # the copies of each piece in one state (q >= 4)
-            state = self._smoother[0]
-            copies = ids[:, None] * q + np.arange(q)  # (n, q)
-            present = np.isin(copies, state.ids)
-            left = np.array([[(0, c) in self._departed for c in row] for row in
-                             copies.tolist()], dtype=bool).reshape(copies.shape)
-            counted = np.all(present | left, axis=1) & np.any(present, axis=1)
-            held, copies, present = ids[counted], copies[counted], present[counted]
-            at = np.empty((len(held), q, 2))
-            rows = np.searchsorted(state.ids, copies[present])
-            at[present] = world_from_cone(state.y[rows], state.angle, omega)[0][:, :2]
-            for a, b in zip(*np.nonzero(~present)):
-                at[a, b] = self._departed[(0, int(copies[a, b]))]
-            predicted = at.transpose(1, 0, 2).reshape(q, -1)
-        else:
-            present = np.array([np.isin(ids, s.ids) for s in self._smoother])  # (q, n)
-            left = np.array([[(k, i) in self._departed for i in ids.tolist()]
-                             for k in range(q)], dtype=bool).reshape(present.shape)
-            counted = np.all(present | left, axis=0) & np.any(present, axis=0)
-            held, present = ids[counted], present[:, counted]
-            at = np.empty((q, len(held), 2))
-            for k, s in enumerate(self._smoother):
-                at[k, present[k]] = self._world(s, held[present[k]], omega)[:, :2]
-                for j in np.nonzero(~present[k])[0]:
-                    at[k, j] = self._departed[(k, int(held[j]))]
-            predicted = at.reshape(q, -1)
+        present, at = self._copies(ids, omega)
+        counted = np.all(np.isfinite(at[:, :, 0]), axis=0) & np.any(present, axis=0)
+        held = ids[counted]
+        predicted = at[:, counted].reshape(q, -1)
         unseen = np.setdiff1d(np.intersect1d(self._window_pieces, followed), ids)
-        if len(unseen) and len(self._smoother) == 1:
-            kept = np.isin(unseen[:, None] * q + np.arange(p), self._smoother[0].ids)
-            self._missed += MISSED_FRAME * kept.sum(axis=0)
-        elif len(unseen):
-            self._missed += MISSED_FRAME * np.array([np.isin(unseen, s.ids).sum()
-                                                     for s in self._smoother[:p]])
+        if len(unseen):
+            self._missed += MISSED_FRAME * self._copies(unseen, omega)[0][:p].sum(axis=1)
         if not len(held):
             return
         self._predicted.append(predicted[:p])
         self._anomalies.append(predicted[p:] - predicted[p:].mean(axis=0))
         self._observed.append(xy[counted].ravel())
         self._observed_ids.append(np.repeat(held, 2))
+
+    def _copies(self, ids: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return where the smoother's Q copies of pieces ids (n,) are, in either layout.
+
+        Returns on the cone (Q, n) bool, and world x, y (Q, n, 2) (m): where the copy is,
+        where it left or failed (:attr:`_departed`), or NaN where it is neither (a piece
+        the window does not hold).
+        """
+        q = len(self.log_d) + len(self.states)
+        if len(self._smoother) == 1:  # the copies of each piece in one state: id * Q + k
+            layout = [(0, ids[None, :] * q + np.arange(q)[:, None])]
+        else:  # one state per copy
+            layout = [(k, ids[None, :]) for k in range(q)]
+        present, at = [], []
+        for index, keys in layout:
+            state = self._smoother[index]
+            here = np.isin(keys, state.ids)
+            where = np.full(keys.shape + (2,), np.nan)
+            where[here] = self._world(state, keys[here], omega)[:, :2]
+            for a, b in zip(*np.nonzero(~here)):
+                where[a, b] = self._departed.get((index, int(keys[a, b])), np.nan)
+            present.append(here)
+            at.append(where)
+        return np.concatenate(present), np.concatenate(at)
 
     def _product(self, member: int, mass: float, parameters: Walk | None = None) -> ProductParams:
         log_d, mu_c = parameters or (self.log_d, self.mu_c)
