@@ -29,10 +29,14 @@ Scores:
 - per forecast, the mass each channel gets over the next 1 and 2 s: the mean absolute error
   summed over the channels (kg), against the open-loop and constant-velocity forecasts and
   persistence (the last window's masses), climatology (each channel's mean rate over the
-  run) and the empty forecast (none)::
+  run) and the empty forecast (none).
+
+With --exits the twin also takes the plant's exits as a channel's sensors would report them
+(each at the end of the frame's step in which it happened), and the count of them it
+explained is printed::
 
     .venv/bin/python benchmarks/twin_forecast_scores.py [--seconds 12] [--members 16] [--seed 1]
-        [--truth 315 0.78] [--particles 32] [--smoother-pieces 6]
+        [--truth 315 0.78] [--particles 32] [--smoother-pieces 6] [--exits]
 """
 
 import argparse
@@ -130,6 +134,9 @@ def main() -> None:
     parser.add_argument('--seed', type=int, default=1, help="the twin's seed")
     parser.add_argument('--particles', type=int, default=TwinSettings.particles)
     parser.add_argument('--smoother-pieces', type=int, default=TwinSettings.smoother_pieces)
+    parser.add_argument('--exits', action='store_true',
+                        help="the twin takes the plant's exits as a channel's sensors report "
+                             'them (measured exits)')
     parser.add_argument('--truth', type=float, nargs=2, metavar=('D', 'MU_C'),
                         help="the plant's d and mu_C (default: the prior's)")
     args = parser.parse_args()
@@ -155,9 +162,16 @@ def main() -> None:
     picks: dict[float, dict] = {}  # forecast time: plant id -> (twin, line) channels
     masses: dict[float, dict] = {}  # forecast time: method -> (W, C) kg
     due = 2.0
+    fed = 0  # the plant's exits given to the twin (with --exits)
+    explained = 0
     for t, ids, truth, seen_ids, xy in plant['frames']:
         twin.cone_speed(t, profile.omega(t))
-        twin.update(t, xy)
+        if args.exits:  # those measured up to the frame (an exit of the frame's step: its end)
+            new = [(te, c) for _, te, c, _ in exits[fed:] if te <= t]
+            fed += len(new)
+            for te, c in new:
+                twin.measured_exit(te, c)
+        explained += twin.update(t, xy).explained
         for i, point in zip(seen_ids.tolist(), xy):
             tracks.setdefault(i, []).append((t, point))
         if t + 1e-9 < due or t > args.seconds - max(WINDOWS):
@@ -187,6 +201,8 @@ def main() -> None:
                      'open loop': open_mass, 'constant velocity': line_mass}
     wall = time.perf_counter() - start
     print(f'{len(exits)} exits, {len(picks)} forecasts, {wall:.1f} s wall', flush=True)
+    if args.exits:
+        print(f'measured exits: {fed} given, {explained} explained', flush=True)
     for lead in LEADS:
         cases, right = 0, {'twin': 0, 'open loop': 0, 'constant velocity': 0}
         for i, (te, channel) in exit_of.items():

@@ -211,11 +211,13 @@ TOPICS: Mapping[str, TopicSpec] = {spec.name: spec for spec in (
     TopicSpec('channel_feed', 'std_msgs/msg/Float64MultiArray', 'in', COMMAND_QOS),
 )}
 
-#: Every topic of ``twin_node``: the camera's detections and the cone's measured speed (the
-#: plant's ``cone_state``) in, the twin's estimates out.
+#: Every topic of ``twin_node``: the camera's detections, the cone's measured speed (the
+#: plant's ``cone_state``) and the channels' measured exits (the plant's ``exit_events``) in,
+#: the twin's estimates out.
 TWIN_TOPICS: Mapping[str, TopicSpec] = {spec.name: spec for spec in (
     TopicSpec('detections', 'sensor_msgs/msg/PointCloud2', 'in', SENSOR_QOS),
     TopicSpec('cone_state', 'sensor_msgs/msg/JointState', 'in', STATE_QOS),
+    TopicSpec('exit_events', 'sensor_msgs/msg/PointCloud2', 'in', EVENTS_QOS),
     TopicSpec('twin/pieces', 'sensor_msgs/msg/PointCloud2', 'out', STATE_QOS),
     TopicSpec('twin/channel_forecast', 'std_msgs/msg/Float64MultiArray', 'out', STATE_QOS),
     TopicSpec('twin/parameters', 'std_msgs/msg/Float64MultiArray', 'out', STATE_QOS),

@@ -20,7 +20,10 @@ Run it beside the feeder (or beside ``sim_node`` standing in for one)::
 
 It subscribes ``detections`` (sensor_msgs/PointCloud2 in the feeder frame: fields x, y, z,
 optionally track_id and mass; ``sim_node``'s ``particle_states`` has this layout) and
-``cone_state`` (sensor_msgs/JointState, joint ``cone``: the measured speed). It publishes
+``cone_state`` (sensor_msgs/JointState, joint ``cone``: the measured speed), and takes the
+exits a channel's sensors measure where they are published: ``exit_events``
+(sensor_msgs/PointCloud2: a field channel, optionally exit_time; ``sim_node``'s has both).
+It publishes
 
 - ``twin/pieces`` (PointCloud2: each piece's position, spread, most likely channel, its
   probability, the time to its exit and the camera's track id last associated with it),
@@ -29,7 +32,8 @@ optionally track_id and mass; ``sim_node``'s ``particle_states`` has this layout
 - ``twin/parameters`` (Float64MultiArray: d, its spread, mu_C, its spread),
 - ``/diagnostics`` (the NIS against its degrees of freedom, the association rate, the
   ensemble's spread, the real-time factor, the latency from a frame's arrival to its
-  publication, and the state: following, open loop or lost),
+  publication, the share of the measured exits the twin explained, and the state:
+  following, open loop or lost),
 
 and records them with its inputs to MCAP (``record_path``). The model is sim_node's
 (``parameter_file``, ``model.*``, ``solver.*``), so a parameter file made for sim_node with
@@ -63,7 +67,7 @@ from ..formats.topics import TWIN_TOPICS
 from ..physics.params import Limit, SolverParams
 from ..physics.simulation import SimParams
 from ..twin.estimator import parameter_note, TUNING, TwinSettings
-from ..twin.frames import cone_speed, detection_frame, MAX_FUTURE
+from ..twin.frames import cone_speed, detection_frame, MAX_FUTURE, measured_exits
 from ..twin.live import Follower, LiveSettings
 from ..twin.messages import channel_forecast_message, parameters_message, pieces_message
 
@@ -170,6 +174,7 @@ class TwinNode(GuardedNode):
                      if spec.direction == 'out'}
         self._outputs.subscription('detections', self._on_detections)
         self._outputs.subscription('cone_state', self._on_cone_state)
+        self._outputs.subscription('exit_events', self._on_exits)
         self._lead: float | None = None  # stamps minus their arrival times (s): the largest
         self._latencies: list[float] = []
         self._arrivals: dict[float, int] = {}  # a waiting frame's stamp (s): arrival (ns)
@@ -268,6 +273,29 @@ class TwinNode(GuardedNode):
         if taken:
             self._publish(taken)
 
+    def _on_exits(self, data: bytes, info: Any) -> None:
+        """Take measured exits: a frame stamped EXIT_LAG s after each takes it."""
+        arrival = _arrival(info)
+        taken: list[float] = []
+        try:
+            msg = self._codec.decode('sensor_msgs/msg/PointCloud2', data, strict=False)
+            t = _seconds(msg['header']['stamp'])
+            self._outputs.received('exit_events', data, round(t * 1e9))
+            latest = self._latest(arrival)
+            if latest is not None and t > latest + MAX_FUTURE:
+                raise TwinError(f'exits at t = {t:.4f} s refused: a stamp from the future '
+                                f'({t - latest:.3f} s ahead of the newest input)')
+            for when, channel in measured_exits(t, cloud_points(msg),
+                                                self._model.channels.count):
+                taken += self._follower.measured_exit(when, channel)
+        except Stopped:
+            return
+        except (ConeFeederError, ValueError) as exc:
+            self._refuse(str(exc))
+            return
+        if taken:
+            self._publish(taken)
+
     # ------------------------------------------------------------------ outputs
 
     def _publish(self, taken: list[float]) -> None:
@@ -310,6 +338,8 @@ class TwinNode(GuardedNode):
             'latency p95 (ms)': f'{1e3 * np.percentile(latencies, 95):.1f}',
             'latency max (ms)': f'{1e3 * np.max(latencies):.1f}',
             'inputs refused': str(self._refused),
+            'exits measured': str(figures['measured']),
+            'exits explained': f"{figures['explained']:.3f}",
         }
         if self._follower.twin is not None:
             ids, _, covariance = self._follower.current.pieces()

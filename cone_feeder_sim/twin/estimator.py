@@ -47,6 +47,7 @@ isotropic in x, y, so its covariance does not change).
 import copy
 from dataclasses import dataclass, replace
 import math
+from typing import Any
 
 import numpy as np
 
@@ -62,8 +63,9 @@ from ..physics.simulation import (
     StepResult, world_from_cone)
 from ..physics.stop import StopFlag
 
-__all__ = ['CALIBRATED_PARTICLES', 'Exit', 'Frame', 'MISSED_FRAME', 'parameter_note', 'STILL',
-           'TUNING', 'Twin', 'TwinSettings', 'weighed_values', 'window_log_likelihood']
+__all__ = ['CALIBRATED_PARTICLES', 'Exit', 'EXIT_LAG', 'EXIT_MATCH', 'Frame', 'MISSED_FRAME',
+           'parameter_note', 'RIM_GATE', 'STILL', 'TUNING', 'Twin', 'TwinSettings',
+           'weighed_values', 'window_log_likelihood']
 
 #: The ranges the members' parameters are held in: log d (d in N*s/m) and mu_C.
 LOG_D_RANGE = (math.log(1.0), math.log(1.0e4))
@@ -85,6 +87,17 @@ CALIBRATED_PARTICLES = 32
 #: in every member has its position alone analysed (:meth:`Twin._analyse`); a forecast takes
 #: riders out after its probe (:mod:`.forecast`).
 STILL = 1.0e-3
+#: A frame takes the measured exits (a channel's sensors) up to this long (s) before its
+#: stamp (:meth:`Twin.measured_exit`): a sensor's report may come as late as a camera's
+#: frame, and which frame takes an exit is then set by the stamps alone, not by the order
+#: they arrived in (a replay gives the same estimates).
+EXIT_LAG = 0.1
+#: A measured exit is the exit the twin itself let happen in the same channel or a
+#: neighbour within this many seconds of it (:meth:`Twin.update`) ...
+EXIT_MATCH = 0.2
+#: ... else the piece the camera did not see in the frame, nearest the channel's stretch of
+#: rim and within this distance of it (m), leaves the twin at once.
+RIM_GATE = 0.05
 
 
 @dataclass(frozen=True)
@@ -170,9 +183,11 @@ class Frame:
     What one frame of detections did.
 
     t (s); associated, births, deaths, exits: counts (exits: pieces that left the cone in
-    most members since the frame before; left: those of them confirmed, :class:`Exit`); nis:
-    the analysis's normalised innovation squared and observed: its degrees of freedom (2
-    per associated piece).
+    most members since the frame before, or at a measured exit; left: those of them
+    confirmed, :class:`Exit`); nis: the analysis's normalised innovation squared and
+    observed: its degrees of freedom (2 per associated piece); measured: the measured exits
+    the frame took, and explained: those of them that were an exit of the twin's or took a
+    piece off the cone (the others matched no piece).
     """
 
     t: float
@@ -183,6 +198,8 @@ class Frame:
     nis: float
     observed: int
     left: tuple[Exit, ...] = ()
+    measured: int = 0
+    explained: int = 0
 
 
 def loosened(params: SimParams, factor: float) -> SimParams:
@@ -295,6 +312,10 @@ class Twin:
         #: among them the twin saw (confirmed pieces)
         self._exits: list[int] = []
         self._left: list[Exit] = []
+        #: the exits the members let happen in the last second, not yet matched with a
+        #: measured one, and the measured exits no frame took yet: (t (s), channel) each
+        self._recent_exits: list[tuple[float, int]] = []
+        self.pending_exits: list[tuple[float, int]] = []
         self._drifted = t0
         #: the window: its start (s); the smoother's members (None: nothing to weigh), run
         #: alongside the twin's: one state holding Q = P + M copies of each piece (id * Q +
@@ -331,6 +352,8 @@ class Twin:
         other.masses, other.last_seen = dict(self.masses), dict(self.last_seen)
         other.hits, other.tracks = dict(self.hits), dict(self.tracks)
         other._exits, other._left = list(self._exits), list(self._left)
+        other._recent_exits = list(self._recent_exits)
+        other.pending_exits = list(self.pending_exits)
         other._smoother = None if self._smoother is None else list(self._smoother)
         other._predicted, other._observed = list(self._predicted), list(self._observed)
         other._observed_ids, other._anomalies = list(self._observed_ids), list(self._anomalies)
@@ -416,8 +439,12 @@ class Twin:
         dropped = [i for i, count in gone.items() if 2 * count > m]
         self._exits += dropped
         for i in dropped:
-            if i in seen and self.hits.get(i, 0) >= self.settings.confirm:
-                times, channels = zip(*seen[i])
+            if i not in seen:
+                continue
+            times, channels = zip(*seen[i])
+            self._recent_exits.append((float(np.mean(times)),
+                                       int(np.bincount(channels).argmax())))
+            if self.hits.get(i, 0) >= self.settings.confirm:
                 self._left.append(Exit(piece=i, t=float(np.mean(times)),
                                        channel=int(np.bincount(channels).argmax()),
                                        mass=self.masses[i]))
@@ -448,6 +475,30 @@ class Twin:
         return {'d': (float(d.mean()), float(d.std(ddof=1))),
                 'mu_C': (float(self.mu_c.mean()), float(self.mu_c.std(ddof=1)))}
 
+    def measured_exit(self, t: float, channel: int) -> None:
+        """
+        Take an exit a channel's sensor measured: t (s), channel (1-based).
+
+        The first frame stamped at least :data:`EXIT_LAG` s after it takes it (see
+        :meth:`update`). Raises ValueError for a time that is not finite or that a frame
+        already passed (:class:`.live.Follower` goes back for it), or a channel not in the
+        layout.
+        """
+        channel = self.exit_channel(channel)
+        if not math.isfinite(t) or t <= self.t - EXIT_LAG:
+            raise ValueError(f'measured exit at t = {t} s: not finite, or older than the '
+                             f'frames the twin took ({self.t} s, less {EXIT_LAG} s)')
+        self.pending_exits.append((float(t), channel))
+        self.pending_exits.sort()
+
+    def exit_channel(self, channel: Any) -> int:
+        """Return channel as an int; raise ValueError if it is not one of the layout's."""
+        count = self.params.model.channels.count
+        if isinstance(channel, bool) or not isinstance(channel, (int, np.integer)) or not (
+                1 <= channel <= count):
+            raise ValueError(f'measured exit: channel {channel!r} is not one of 1..{count}')
+        return int(channel)
+
     def update(self, t: float, detections: np.ndarray, masses: np.ndarray | None = None,
                track_ids: np.ndarray | None = None) -> Frame:
         """
@@ -458,6 +509,14 @@ class Twin:
         track ids (NO_TRACK: not given), or None: none given. The association is by position
         alone; each piece keeps the track id of the last detection with one associated with
         it (:attr:`tracks`).
+
+        The frame takes the measured exits (:meth:`measured_exit`) up to t - :data:`EXIT_LAG`.
+        One that an exit of the twin's (members' mean time, their channel) within
+        :data:`EXIT_MATCH` s and one channel explains changes nothing; else the piece that
+        no detection of the frame was associated with and that is nearest the channel's
+        stretch of rim, within :data:`RIM_GATE`, leaves the twin at the measured time
+        (:attr:`Frame.left`), instead of dying ``death_after`` s later while the forecasts
+        still count it.
         """
         detections = np.asarray(detections, dtype=float).reshape(-1, detections.shape[-1])
         if not np.isfinite(detections).all():
@@ -483,6 +542,13 @@ class Twin:
                 self.last_seen[i] = t
                 self.hits[i] = min(self.hits.get(i, 0) + 1, self.settings.confirm)
         self._window_frame(t, ids[match.pairs[:, 0]], detections[match.pairs[:, 1], :2], ids)
+        due = [e for e in self.pending_exits if e[0] <= t - EXIT_LAG]
+        self.pending_exits = self.pending_exits[len(due):]
+        measured = np.array(due, dtype=float).reshape(-1, 2)
+        unseen = ~np.isin(ids, ids[match.pairs[:, 0]])
+        taken, left, explained = self._measured_exits(t, measured, ids[unseen], mean[unseen])
+        exits += len(taken)
+        seen_leaving += tuple(left)
         # a detection left over is a birth, unless it is within 3 sigma of the rim (a piece
         # leaving, or a false detection there: no member could hold it on the cone)
         rim = self.params.model.r - 3.0 * sigma
@@ -506,7 +572,59 @@ class Twin:
             self._smooth()
             self._start_window(t)
         return Frame(t=t, associated=len(match.pairs), births=len(born), deaths=len(dead),
-                     exits=exits, nis=nis, observed=observed, left=seen_leaving)
+                     exits=exits, nis=nis, observed=observed, left=seen_leaving,
+                     measured=len(measured), explained=explained)
+
+    def _measured_exits(self, t: float, measured: np.ndarray, ids: np.ndarray,
+                        xy: np.ndarray) -> tuple[list[int], list[Exit], int]:
+        """
+        Take measured exits (e, 2: t (s), channel); return what they took off the cone.
+
+        ids (n,) and xy (n, 2) (m, world): the pieces no detection of the frame was
+        associated with, and where the members' mean has them (see :meth:`update`). Returns
+        the pieces taken off (ids), the exits the twin saw among them (confirmed pieces) and
+        how many measured exits an exit of the twin's or a piece explained.
+        """
+        self._recent_exits = [e for e in self._recent_exits if e[0] >= t - 1.0]
+        explained = 0
+        layout, radius = self.params.model.channels, self.params.model.r
+        taken: list[int] = []
+        left: list[Exit] = []
+        free = np.ones(len(ids), dtype=bool)
+        for when, channel in measured.tolist():
+            channel = int(channel)
+            near = [k for k, (te, c) in enumerate(self._recent_exits)
+                    if abs(te - when) <= EXIT_MATCH
+                    and min((c - channel) % layout.count, (channel - c) % layout.count) <= 1]
+            if near:
+                self._recent_exits.pop(min(near, key=lambda k: abs(
+                    self._recent_exits[k][0] - when)))
+                explained += 1
+                continue
+            if not free.any():
+                continue
+            start, end = np.radians(layout.sector_edges(channel))
+            angle = np.arctan2(xy[:, 1], xy[:, 0])
+            offset = np.mod(angle - start, 2.0 * np.pi)  # from the sector's start, ccw
+            width = np.mod(end - start, 2.0 * np.pi)
+            # the nearest point of the channel's stretch of rim: inside it, at the piece's
+            # angle, else at the nearer edge
+            nearest = np.where(offset <= width, angle,
+                               np.where(offset - width < 2.0 * np.pi - offset, end, start))
+            distance = np.hypot(xy[:, 0] - radius * np.cos(nearest),
+                                xy[:, 1] - radius * np.sin(nearest))
+            distance[~free] = np.inf
+            k = int(np.argmin(distance))
+            if distance[k] > RIM_GATE:
+                continue
+            free[k] = False
+            i = int(ids[k])
+            taken.append(i)
+            if self.hits.get(i, 0) >= self.settings.confirm:
+                left.append(Exit(piece=i, t=float(when), channel=channel, mass=self.masses[i]))
+            explained += 1
+        self._drop(taken)
+        return taken, left, explained
 
     def _merge(self, t: float) -> list[int]:
         """

@@ -28,7 +28,7 @@ from ..errors import TwinError
 from ..formats.pointcloud import NO_TRACK
 
 __all__ = ['cone_speed', 'DetectionFrame', 'detection_frame', 'MAX_DETECTIONS',
-           'MAX_FUTURE']
+           'MAX_FUTURE', 'measured_exits']
 
 #: The most detections a frame may hold; a larger frame is refused.
 MAX_DETECTIONS = 10_000
@@ -112,6 +112,32 @@ def _track_ids(values: np.ndarray) -> np.ndarray | None:
     ids = np.full(len(wide), NO_TRACK, dtype=np.uint32)
     ids[valid] = wide[valid]
     return ids
+
+
+def measured_exits(t: float, points: np.ndarray, channels: int) -> list[tuple[float, int]]:
+    """
+    Check a message of measured exits and return them: (t (s), channel) each.
+
+    points: a structured array with a field channel (1-based) and optionally exit_time (s;
+    else each exit is at the stamp t), as sim_node's ``exit_events`` (a channel's sensors
+    may send fewer fields); channels: the layout's count. Raises TwinError naming what is
+    wrong; the message is then taken whole or not at all.
+    """
+    names = points.dtype.names or ()
+    if 'channel' not in names:
+        raise TwinError(f'exits at t = {t:.4f} s refused: no channel field (it has '
+                        f'{", ".join(names) or "none"})')
+    if len(points) > MAX_DETECTIONS:
+        raise TwinError(f'exits at t = {t:.4f} s refused: {len(points)} exits, more than '
+                        f'{MAX_DETECTIONS}')
+    times = (np.asarray(points['exit_time'], dtype=float) if 'exit_time' in names
+             else np.full(len(points), float(t)))
+    channel = np.asarray(points['channel'], dtype=float)
+    if not (np.isfinite(times).all() and np.isfinite(t)):
+        raise TwinError(f'exits at t = {t:.4f} s refused: a time that is not finite')
+    if not np.all((channel == np.floor(channel)) & (channel >= 1) & (channel <= channels)):
+        raise TwinError(f'exits at t = {t:.4f} s refused: a channel not in 1..{channels}')
+    return sorted(zip(times.tolist(), channel.astype(int).tolist()))
 
 
 def cone_speed(t: float, names: list[str], velocities: list[float],

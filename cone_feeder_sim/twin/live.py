@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import math
 import time
 
-from .estimator import Frame, Twin, TwinSettings
+from .estimator import EXIT_LAG, Frame, Twin, TwinSettings
 from .forecast import Forecast, forecast
 from .frames import DetectionFrame
 from ..errors import Stopped
@@ -93,8 +93,10 @@ class Follower:
         self._ahead: Twin | None = None
         #: (t, the twin before it moved to t, the frame analysed at t); the last max_delay s
         self._history: deque[tuple[float, Twin, DetectionFrame]] = deque()
-        #: the cone speeds measured over the history: (t, omega)
+        #: the cone speeds measured over the history: (t, omega); the measured exits: (t,
+        #: channel)
         self._speeds: deque[tuple[float, float]] = deque()
+        self._measured: list[tuple[float, int]] = []
         self._cone_t = -math.inf
         self._due = 0.0
         #: per frame of the last second: (t, detections, associated or born)
@@ -102,7 +104,7 @@ class Follower:
         #: counters since the last :meth:`figures` call
         self._window = {'frames': 0, 'nis': 0.0, 'observed': 0, 'detections': 0,
                         'associated': 0, 'busy': 0.0, 'stream': 0.0, 'forecasts': 0,
-                        'forecast_busy': 0.0}
+                        'forecast_busy': 0.0, 'measured': 0, 'explained': 0}
         self._pool = ThreadPoolExecutor(1, 'twin-forecast') if settings.background else None
         self._running: Future | None = None
 
@@ -168,6 +170,30 @@ class Follower:
         self._waiting.append(found)
         return taken + self._take(lambda waiting: waiting.t <= self._cone_t)
 
+    def measured_exit(self, t: float, channel: int) -> list[float]:
+        """
+        Take an exit a channel's sensor measured at t (s); return the stamps analysed again.
+
+        The frame stamped :data:`~.estimator.EXIT_LAG` s after it takes it
+        (:meth:`.estimator.Twin.update`); one that comes after that frame was analysed goes
+        back to the twin before it, as a late frame does. Raises ValueError for a channel not
+        in the layout, or an exit older than the history.
+        """
+        twin = self._start(t)
+        if t > twin.t - EXIT_LAG:
+            twin.measured_exit(t, channel)
+            self._measured.append((t, channel))
+            return []
+        later = [k for k, (stamp, _, _) in enumerate(self._history) if stamp - EXIT_LAG >= t]
+        if not later or self._history[later[0]][1].t - EXIT_LAG >= t:
+            raise ValueError(f'measured exit at t = {t} s is older than the twin can go back '
+                             f'to (max_delay {self.settings.max_delay} s)')
+        self._measured.append((t, twin.exit_channel(channel)))
+        frames = self._back_to(later[0])
+        for found in frames:
+            self._analyse(found)
+        return [found.t for found in frames]
+
     def _take(self, ready: Callable[[DetectionFrame], bool]) -> list[float]:
         taken = []
         while self._waiting and ready(self._waiting[0]):
@@ -186,6 +212,26 @@ class Follower:
             self._history.popleft()
         while self._speeds and self._speeds[0][0] < t - self.settings.max_delay - 1.0:
             self._speeds.popleft()
+        oldest = self._history[0][1].t - EXIT_LAG  # the exits no snapshot can take again
+        self._measured = [e for e in self._measured if e[0] > oldest]
+
+    def _back_to(self, first: int) -> list[DetectionFrame]:
+        """
+        Go back to the twin before the history's frame ``first``; return the frames from it.
+
+        The cone speeds and measured exits taken since are given to it again (stamp order:
+        what they would have given in order).
+        """
+        _, twin, _ = self._history[first]
+        frames = [found for _, _, found in list(self._history)[first:]]
+        for _ in range(len(self._history) - first):
+            self._history.pop()
+        self.twin = twin
+        for t, omega in self._speeds:
+            if t > twin.times[-1]:
+                twin.cone_speed(t, omega)
+        twin.pending_exits = sorted(e for e in self._measured if e[0] > twin.t - EXIT_LAG)
+        return frames
 
     def _rewind(self, late: DetectionFrame) -> None:
         """
@@ -201,15 +247,7 @@ class Follower:
             raise ValueError(f'detections at t = {late.t} s are older than the twin '
                              f'({self.twin.t} s) can go back to ({since:g} s: max_delay '
                              f'{self.settings.max_delay} s, or the twin began later)')
-        first = later[0]
-        _, twin, _ = self._history[first]
-        frames = [found for _, _, found in list(self._history)[first:]]
-        for _ in range(len(self._history) - first):
-            self._history.pop()
-        self.twin = twin
-        for t, omega in self._speeds:
-            if t > twin.times[-1]:
-                twin.cone_speed(t, omega)
+        frames = self._back_to(later[0])
         for found in sorted(frames + [late], key=lambda f: f.t):
             self._analyse(found)
 
@@ -230,6 +268,8 @@ class Follower:
         window['observed'] += done.observed
         window['detections'] += len(found.xy)
         window['associated'] += done.associated
+        window['measured'] += done.measured
+        window['explained'] += done.explained
         self._recent.append((found.t, len(found.xy), done.associated + done.births))
         while self._recent and self._recent[0][0] < found.t - 1.0:
             self._recent.popleft()
@@ -287,7 +327,9 @@ class Follower:
         Return the figures since the last call, and start a new window.
 
         frames, forecasts; nis and observed (its degrees of freedom); association (the share
-        of detections associated); rtf: stream seconds taken per second of computing (at
+        of detections associated); measured: the measured exits the frames took, explained:
+        the share of them an exit of the twin's or a piece explained (NaN: none); rtf: stream
+        seconds taken per second of computing (at
         least 1: the twin keeps up with a live stream; background forecasts counted as if
         they took turns with the frames, which two cores need not); busy (s of computing).
         """
@@ -299,6 +341,9 @@ class Follower:
                'observed': w['observed'], 'busy': w['busy'],
                'association': (w['associated'] / w['detections'] if w['detections']
                                else float('nan')),
+               'measured': w['measured'],
+               'explained': (w['explained'] / w['measured'] if w['measured']
+                             else float('nan')),
                'rtf': w['stream'] / w['busy'] if w['busy'] > 0.0 else float('inf')}
         for key in w:
             w[key] = 0.0 if isinstance(w[key], float) else 0

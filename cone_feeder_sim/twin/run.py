@@ -14,20 +14,24 @@
 """
 The headless twin: a twin file's recorded streams through the estimator, faster than real time.
 
-Frames are the detections sharing a stamp. Before each frame the cone speeds measured up to
-its stamp are taken; the frame is then associated and analysed (:class:`.estimator.Twin`).
+Frames are the detections sharing a stamp. Before each frame the cone speeds and measured
+exits up to its stamp are taken; the frame is then associated and analysed
+(:class:`.estimator.Twin`; it takes the exits up to :data:`.estimator.EXIT_LAG` before it).
 Every ``every`` s of stream time the twin forecasts (:func:`.forecast.forecast`, under the
 measured speed held). A bad frame (a coordinate not finite, more than
 :data:`.frames.MAX_DETECTIONS` points, a stamp older than the twin) is refused with one line and
-the twin goes on; so is a cone speed that is not finite. The output directory gets:
+the twin goes on; so is a cone speed that is not finite, and a measured exit that is not in
+a channel of the layout. The output directory gets:
 
 - ``channel_forecast.csv``: t, horizon, channel, mass, spread (s, s, -, kg, kg);
 - ``pieces.csv``: t, piece, x, y, channel (0: stays), probability, exit_time, track_id (s,
   -, m, m, -, -, s, -; exit_time empty where no member lets the piece leave, track_id: the
   camera's track id last associated with the piece, empty where the detections have none);
 - ``parameters.csv``: t, key, estimate, spread;
-- ``frames.csv``: t, detections, associated, births, deaths, exits, nis, observed (the
-  diagnostics; nis over observed is the consistency test);
+- ``frames.csv``: t, detections, associated, births, deaths, exits, nis, observed, measured,
+  explained (the diagnostics; nis over observed is the consistency test; measured: the
+  measured exits the frame took, explained: those an exit of the twin's or a piece
+  explained);
 - ``exits.csv``: t, piece, channel, mass (s, -, -, kg): the exits the twin saw, each piece
   followed to the rim (:class:`.estimator.Exit`): what the forecasts are scored against;
 - ``report.png``: the one-page report (:mod:`.figure`): forecast error against lead time,
@@ -58,7 +62,7 @@ FILES = {
     'pieces.csv': ('t', 'piece', 'x', 'y', 'channel', 'probability', 'exit_time', 'track_id'),
     'parameters.csv': ('t', 'key', 'estimate', 'spread'),
     'frames.csv': ('t', 'detections', 'associated', 'births', 'deaths', 'exits', 'nis',
-                   'observed'),
+                   'observed', 'measured', 'explained'),
     'exits.csv': ('t', 'piece', 'channel', 'mass'),
 }
 
@@ -83,13 +87,15 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
     """
     out.mkdir(parents=True, exist_ok=True)
     scenario = spec.scenario
-    firsts = [table[0, 0] for table in (spec.detections, spec.cone) if len(table)]
+    firsts = [table[0, 0] for table in (spec.detections, spec.cone, spec.exits) if len(table)]
     twin = Twin(SimParams(model=scenario.model, solver=scenario.solver), spec.settings(),
                 t0=float(min(firsts, default=0.0)))
     stamps, starts = np.unique(spec.detections[:, 0], return_index=True)
     ends = list(starts[1:]) + [len(spec.detections)]
     cone = iter(spec.cone.tolist())
     pending = next(cone, None)
+    exits = iter(spec.exits.tolist())
+    measured = next(exits, None)
     frames = refused = forecasts = observed = 0
     nis = 0.0
     due = stamps[0] if len(stamps) else 0.0
@@ -106,6 +112,14 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
                 except ValueError as exc:
                     log(f'cone speed refused: {exc}')
                 pending = next(cone, None)
+            while measured is not None and measured[0] <= t:
+                try:
+                    channel = measured[1]
+                    twin.measured_exit(measured[0], int(channel) if channel == channel // 1
+                                       else channel)
+                except ValueError as exc:
+                    log(f'exit refused: {exc}')
+                measured = next(exits, None)
             rows = spec.detections[a:b]
             points = np.rec.fromarrays(rows[:, 1:5].T, names=('x', 'y', 'mass', 'track_id'))
             try:
@@ -124,7 +138,8 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
             observed += frame.observed
             writers['frames.csv'].writerow([f'{t:.6f}', len(rows), frame.associated,
                                             frame.births, frame.deaths, frame.exits,
-                                            f'{frame.nis:.6g}', frame.observed])
+                                            f'{frame.nis:.6g}', frame.observed,
+                                            frame.measured, frame.explained])
             for left in frame.left:
                 writers['exits.csv'].writerow([f'{left.t:.6f}', left.piece, left.channel,
                                                f'{left.mass:.6g}'])

@@ -23,6 +23,9 @@ A twin file is a YAML mapping::
                                # default /detections, else /particle_states)
     cone: cone.csv             # columns t, omega (s, rad/s), or an MCAP file (a JointState
                                # topic: cone_topic, default /cone_state; joint cone)
+    exits: exits.csv           # optional, measured exits: columns t, channel (s, 1-based),
+                               # or an MCAP file (a PointCloud2 topic: exits_topic, default
+                               # /exit_events; fields channel, optionally exit_time)
     # defaults:
     members: 8                 # the ensemble's size
     sigma: 0.002               # the detections' noise (m)
@@ -51,7 +54,7 @@ from typing import Any
 import numpy as np
 
 from .estimator import TUNING, TwinSettings
-from .streams import mcap_cone, mcap_detections
+from .streams import mcap_cone, mcap_detections, mcap_exits
 from ..errors import ConeFeederError, TwinError
 from ..feeder.scenario import Scenario
 from ..formats.parameter_file import read_yaml
@@ -59,8 +62,8 @@ from ..formats.scenario_file import load_scenario
 
 __all__ = ['load_twin', 'TwinSpec', 'TWIN_KEYS']
 
-TWIN_KEYS = ('scenario', 'detections', 'cone', 'members', 'sigma', 'horizons', 'every', 'seed',
-             'detections_topic', 'cone_topic', *TUNING)
+TWIN_KEYS = ('scenario', 'detections', 'cone', 'exits', 'members', 'sigma', 'horizons',
+             'every', 'seed', 'detections_topic', 'cone_topic', 'exits_topic', *TUNING)
 
 
 @dataclass(frozen=True)
@@ -71,7 +74,9 @@ class TwinSpec:
     scenario: the machine and the product prior; detections: (k, 5) rows t (s), x, y (m),
     mass (kg), track_id (NaN: not given), sorted by t (z is not read); cone: (j, 2) rows
     t (s), omega (rad/s), sorted; members, sigma (m), horizons (s), every (s), seed as in the file;
-    tuning: the other estimator settings the file sets (:data:`TUNING`).
+    tuning: the other estimator settings the file sets (:data:`TUNING`); exits: (e, 2) rows
+    t (s), channel (NaN: not given; checked when the twin takes it), sorted, the measured
+    exits (none without the key).
     """
 
     scenario: Scenario
@@ -83,6 +88,7 @@ class TwinSpec:
     every: float = 0.1
     seed: int = 0
     tuning: dict[str, float] = field(default_factory=dict)
+    exits: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     def settings(self) -> TwinSettings:
         """Return the estimator's settings: the file's, the scenario's product as the prior."""
@@ -149,7 +155,9 @@ def load_twin(path: str | Path) -> TwinSpec:
             raise TwinError(f'{key} must name a file, got {content.get(key)!r}')
     base = path.parent
     scenario = load_scenario(base / content['scenario'])
-    for key in ('detections_topic', 'cone_topic'):
+    if 'exits' in content and not isinstance(content['exits'], str):
+        raise TwinError(f'exits must name a file, got {content["exits"]!r}')
+    for key in ('detections_topic', 'cone_topic', 'exits_topic'):
         if content.get(key) is not None and not isinstance(content[key], str):
             raise TwinError(f'{key} must name a topic, got {content[key]!r}')
     found, speeds = base / content['detections'], base / content['cone']
@@ -158,13 +166,18 @@ def load_twin(path: str | Path) -> TwinSpec:
                   else _rows(found, ('t', 'x', 'y'), ('mass', 'track_id')))
     cone = (mcap_cone(speeds, content.get('cone_topic')) if speeds.suffix == '.mcap'
             else _rows(speeds, ('t', 'omega'), ()))
+    exits = np.zeros((0, 2))
+    if 'exits' in content:
+        measured = base / content['exits']
+        exits = (mcap_exits(measured, content.get('exits_topic')) if measured.suffix == '.mcap'
+                 else _rows(measured, ('t', 'channel'), ()))
     horizons = content.get('horizons', [0.5, 1.0, 2.0])
     if (not isinstance(horizons, list) or not horizons or any(
             isinstance(h, bool) or not isinstance(h, (int, float)) or not 0 < h <= 60
             for h in horizons)):
         raise TwinError(f'horizons must be a list of numbers in (0, 60] s, got {horizons!r}')
     return TwinSpec(
-        scenario=scenario, detections=detections, cone=cone,
+        scenario=scenario, detections=detections, cone=cone, exits=exits,
         members=_number(content, 'members', TwinSettings.members, 2, integer=True),
         sigma=float(_number(content, 'sigma', 0.002, 1e-6)),
         horizons=tuple(sorted(float(h) for h in horizons)),

@@ -17,8 +17,10 @@ A twin's streams from an MCAP recording: a PointCloud2 topic's detections, a Joi
 A recording of ``sim_node`` (or of a camera and an encoder, recorded by rosbag2 in MCAP) is
 read as the headless twin's input: each PointCloud2 message of the detections topic is one
 frame at its header's stamp (fields x, y and optionally mass), each JointState message of
-the cone topic one speed of the joint ``cone``. Topics default to ``/detections`` (else
-``/particle_states``, what sim_node records) and ``/cone_state``.
+the cone topic one speed of the joint ``cone``, each PointCloud2 message of the exits topic
+the exits measured in it (fields channel and optionally exit_time, else at the header's
+stamp). Topics default to ``/detections`` (else ``/particle_states``, what sim_node
+records), ``/cone_state`` and ``/exit_events``.
 """
 
 from pathlib import Path
@@ -30,7 +32,7 @@ from ..formats.cdr import decode
 from ..formats.mcap_reader import open_recording
 from ..formats.pointcloud import cloud_points
 
-__all__ = ['mcap_cone', 'mcap_detections']
+__all__ = ['mcap_cone', 'mcap_detections', 'mcap_exits']
 
 #: The detections topics tried in turn when none is named.
 DETECTION_TOPICS = ('/detections', '/particle_states')
@@ -81,4 +83,22 @@ def mcap_cone(path: Path, topic: str | None = None, joint: str = 'cone') -> np.n
             rows.append([stamp['sec'] + stamp['nanosec'] * 1e-9,
                          float(state['velocity'][state['name'].index(joint)])])
     table = np.array(rows, dtype=float).reshape(-1, 2)
+    return table[np.argsort(table[:, 0], kind='stable')]
+
+
+def mcap_exits(path: Path, topic: str | None = None) -> np.ndarray:
+    """Return the measured exits (e, 2): t (s), channel (1-based; NaN: none), sorted by t."""
+    recording, chosen = _recording(path, topic, ('/exit_events',), 'sensor_msgs/msg/PointCloud2')
+    rows = []
+    for message in recording.messages({chosen}):
+        cloud = decode(message.type_name, message.data)
+        stamp = cloud['header']['stamp']
+        points = cloud_points(cloud)
+        names = points.dtype.names or ()
+        times = (np.asarray(points['exit_time'], dtype=float) if 'exit_time' in names
+                 else np.full(len(points), stamp['sec'] + stamp['nanosec'] * 1e-9))
+        channels = (np.asarray(points['channel'], dtype=float) if 'channel' in names
+                    else np.full(len(points), np.nan))
+        rows.append(np.column_stack([times, channels]))
+    table = np.concatenate(rows) if rows else np.zeros((0, 2))
     return table[np.argsort(table[:, 0], kind='stable')]

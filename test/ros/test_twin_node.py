@@ -23,7 +23,7 @@ from typing import Any
 from cone_feeder_sim.formats.cdr import CdrCodec
 from cone_feeder_sim.formats.mcap_reader import open_recording, parse_run_source
 from cone_feeder_sim.formats.messages import cloud_message, cone_state_message, header
-from cone_feeder_sim.formats.pointcloud import cloud_points, NO_TRACK, STATE_DTYPE
+from cone_feeder_sim.formats.pointcloud import cloud_points, EXIT_DTYPE, NO_TRACK, STATE_DTYPE
 from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
@@ -59,6 +59,7 @@ class Plant:
         self.node = Node('camera', context=context)
         self.detections = self.node.create_publisher(PointCloud2, 'detections', 10)
         self.cone = self.node.create_publisher(JointState, 'cone_state', 10)
+        self.exits = self.node.create_publisher(PointCloud2, 'exit_events', 10)
         self.received: dict[str, list] = {'pieces': [], 'forecast': [], 'parameters': [],
                                           'diagnostics': []}
         for kind, topic, msg_type in (('pieces', 'twin/pieces', PointCloud2),
@@ -201,7 +202,17 @@ def test_bad_inputs_are_refused_and_the_twin_goes_on(context: Any, tmp_path: Pat
         plant.cone.publish(CODEC.encode('sensor_msgs/msg/JointState', {
             'header': header(0.2, 'feeder'), 'name': ['belt'], 'position': np.zeros(1),
             'velocity': np.zeros(1), 'effort': np.zeros(0)}))
-        assert plant.spin_until(lambda: len(logged) >= 5)
+        exits = np.zeros(2, dtype=EXIT_DTYPE)
+        exits['exit_time'], exits['channel'] = [0.15, 0.16], [3, 15]
+        plant.exits.publish(CODEC.encode('sensor_msgs/msg/PointCloud2',
+                                         cloud_message(header(0.17, 'feeder'), exits)))
+        assert plant.spin_until(lambda: len(logged) >= 6)
+        assert any('a channel not in 1..14' in line for line in logged)
+        exits['channel'][1] = 4  # a good one: the twin waits to take it
+        plant.exits.publish(CODEC.encode('sensor_msgs/msg/PointCloud2',
+                                         cloud_message(header(0.17, 'feeder'), exits)))
+        assert plant.spin_until(lambda: len(twin._follower.twin.pending_exits) == 2)
+        assert twin._follower.twin.pending_exits == [(0.15, 3), (0.16, 4)]
         assert any('not finite' in line for line in logged)
         assert any("frame_id 'camera'" in line for line in logged)
         assert any('from the future' in line for line in logged)

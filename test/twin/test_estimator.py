@@ -27,8 +27,8 @@ from cone_feeder_sim.physics.simulation import (
     add_particles, advance, remove_particles, resting_height, SimParams, SimState,
     world_from_cone)
 from cone_feeder_sim.twin.estimator import (
-    Frame, MISSED_FRAME, parameter_note, STILL, Twin, TwinSettings, weighed_values,
-    window_log_likelihood)
+    Exit, EXIT_LAG, Frame, MISSED_FRAME, parameter_note, STILL, Twin, TwinSettings,
+    weighed_values, window_log_likelihood)
 from cone_feeder_sim.twin.particles import resample_parameters
 import numpy as np
 import pytest
@@ -93,6 +93,98 @@ def test_a_piece_that_leaves_the_plant_leaves_the_twin(followed: tuple) -> None:
     assert left >= 1  # the cone at 6 rad/s throws the outermost piece off (at 0.77 s)
     assert sum(frame.exits + frame.deaths for frame, _, _ in frames) == left
     assert len(twin.pieces()[0]) == frames[-1][1]
+
+
+def rim_twin() -> Twin:
+    """Return a twin of two resting pieces, one 15 mm from the rim at angle 0, seen at 0."""
+    twin = Twin(PARAMS, TwinSettings(members=4, sigma=SIGMA, confirm=1, seed=4))
+    twin.cone_speed(0.0, 0.0)
+    twin.update(0.0, np.array([[0.21, 0.0], [0.05, 0.05]]))
+    return twin
+
+
+def test_a_measured_exit_takes_the_unseen_piece_at_the_rim_of_its_channel() -> None:
+    channel = int(MODEL.channels.channel_of(0.0))  # the rim piece's
+    opposite = int(MODEL.channels.channel_of(180.0))
+    inner = np.array([[0.05, 0.05]])  # the camera sees the inner piece alone from now on
+    # without a measured exit, or with one in the opposite channel, the unseen piece stays
+    # (the pieces rest: only death_after, 1 s unseen, would take it)
+    for measured in ((), ((0.1, opposite),)):
+        twin = rim_twin()
+        for when, c in measured:
+            twin.measured_exit(when, c)
+        frame = twin.update(0.1 + EXIT_LAG, inner)
+        assert twin.pieces()[0].tolist() == [0, 1] and frame.left == ()
+        assert frame.measured == len(measured) and frame.explained == 0
+    # in its channel: it leaves at once, at the measured time
+    twin = rim_twin()
+    twin.measured_exit(0.1, channel)
+    frame = twin.update(0.1 + EXIT_LAG, inner)
+    assert twin.pieces()[0].tolist() == [1]
+    assert frame.measured == frame.explained == frame.exits == 1
+    assert frame.left == (Exit(piece=0, t=0.1, channel=channel, mass=MODEL.product.m),)
+    # a piece the camera sees is never taken, however near the rim
+    twin = rim_twin()
+    twin.measured_exit(0.1, channel)
+    frame = twin.update(0.1 + EXIT_LAG, np.array([[0.21, 0.0], [0.05, 0.05]]))
+    assert frame.measured == 1 and frame.explained == 0 and len(twin.pieces()[0]) == 2
+
+
+def test_a_frame_takes_the_exits_measured_up_to_exit_lag_before_it() -> None:
+    twin = rim_twin()
+    twin.measured_exit(0.2, int(MODEL.channels.channel_of(0.0)))
+    inner = np.array([[0.05, 0.05]])
+    assert twin.update(0.2 + 0.5 * EXIT_LAG, inner).measured == 0
+    assert twin.pending_exits and len(twin.pieces()[0]) == 2
+    assert twin.update(0.2 + EXIT_LAG, inner).measured == 1
+    assert not twin.pending_exits and twin.pieces()[0].tolist() == [1]
+
+
+def test_an_exit_the_twin_let_happen_explains_the_measured_one() -> None:
+    # the plant's outermost piece leaves at 0.76 s: the twin lets it leave too (at 0.75 s),
+    # and the plant's exit, measured, is that exit: it changes nothing
+    q = np.array([[x, y, resting_height(MODEL, MODEL.product, x, y)] for x, y in PLACES])
+    start, _ = add_particles(SimState(), PARAMS, q)
+    runs = []
+    for measure in (True, False):
+        plant = start
+        twin = Twin(PARAMS, TwinSettings(members=4, sigma=SIGMA, d_spread=0.05,
+                                         mu_C_spread=0.01, seed=1))
+        rng = np.random.default_rng(0)
+        frames, measured = [], []
+        for k in range(1, 34):
+            t = k / 30.0
+            result = advance(plant, PARAMS, PROFILE, t)
+            plant = result.state
+            measured += zip(result.exits.t.tolist(), result.exits.channel.tolist())
+            if measure:
+                for when, channel in measured[len(measured) - len(result.exits):]:
+                    twin.measured_exit(when, channel)
+            twin.cone_speed(t, PROFILE.omega(t))
+            seen, _, _ = world_from_cone(plant.y, plant.angle, PROFILE.omega(t))
+            noise = rng.normal(0.0, SIGMA, (plant.count, 2))
+            frames.append(twin.update(t, seen[:, :2] + noise))
+        runs.append((twin, frames, measured))
+    (twin, frames, measured), (alone, frames_alone, _) = runs
+    assert len(measured) == 1
+    assert sum(f.measured for f in frames) == 1 and sum(f.explained for f in frames) == 1
+    (left,) = [e for f in frames for e in f.left]
+    assert left.channel == measured[0][1] and abs(left.t - measured[0][0]) < 0.02
+    assert [replace(f, measured=0, explained=0) for f in frames] == frames_alone
+    assert np.array_equal(twin.pieces()[1], alone.pieces()[1])
+
+
+def test_a_bad_measured_exit_is_refused_with_its_reason() -> None:
+    twin = rim_twin()
+    for channel in (0, MODEL.channels.count + 1, 2.0, True):
+        with pytest.raises(ValueError, match=f'channel {channel!r} is not one of 1..14'):
+            twin.measured_exit(0.05, channel)
+    twin.update(0.5, np.array([[0.05, 0.05]]))
+    with pytest.raises(ValueError, match='older than the frames the twin took'):
+        twin.measured_exit(0.5 - EXIT_LAG, 3)
+    with pytest.raises(ValueError, match='not finite'):
+        twin.measured_exit(float('nan'), 3)
+    assert not twin.pending_exits
 
 
 def test_a_small_ensemble_follows_many_pieces_consistently() -> None:

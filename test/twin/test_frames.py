@@ -12,12 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Tests of cone_feeder_sim.twin.frames: a frame's track ids, as a camera or a CSV gives them."""
+"""Tests of cone_feeder_sim.twin.frames: a frame's track ids, measured exits."""
 
-from cone_feeder_sim.formats.pointcloud import DETECTION_DTYPE, NO_TRACK
+from cone_feeder_sim.errors import TwinError
+from cone_feeder_sim.formats.pointcloud import DETECTION_DTYPE, EXIT_DTYPE, NO_TRACK
 from cone_feeder_sim.twin.estimator import Twin, TwinSettings
-from cone_feeder_sim.twin.frames import detection_frame
+from cone_feeder_sim.twin.frames import detection_frame, measured_exits
 import numpy as np
+import pytest
 from test_twin_live import PARAMS
 
 
@@ -49,3 +51,31 @@ def test_a_piece_keeps_its_last_track_id_and_none_is_not_one() -> None:
     assert twin.tracks == {0: 11, 1: 12, 2: 14}  # none keeps the last; a new one replaces it
     twin._drop([1])
     assert twin.tracks == {0: 11, 2: 14}
+
+
+def test_measured_exits_are_read_from_sim_node_s_layout_or_a_sensor_s() -> None:
+    points = np.zeros(2, dtype=EXIT_DTYPE)  # sim_node's exit_events: the exit_time field
+    points['exit_time'], points['channel'] = [0.42, 0.31], [3, 14]
+    assert measured_exits(0.5, points, 14) == [(0.31, 14), (0.42, 3)]
+    sensor = np.zeros(1, dtype=[('channel', '<u1')])  # a sensor's: the stamp is the time
+    sensor['channel'] = 7
+    assert measured_exits(0.5, sensor, 14) == [(0.5, 7)]
+
+
+@pytest.mark.parametrize(('change', 'fragment'), [
+    ({'channel': [3, 15]}, 'a channel not in 1..14'),
+    ({'channel': [0, 2]}, 'a channel not in 1..14'),
+    ({'channel': [2.5, 2]}, 'a channel not in 1..14'),
+    ({'exit_time': [0.1, np.nan]}, 'a time that is not finite'),
+])
+def test_a_bad_message_of_exits_is_refused_whole(change: dict, fragment: str) -> None:
+    points = np.zeros(2, dtype=[('exit_time', '<f8'), ('channel', '<f8')])
+    points['exit_time'], points['channel'] = [0.1, 0.2], [3, 4]
+    for key, value in change.items():
+        points[key] = value
+    with pytest.raises(TwinError, match=fragment):
+        measured_exits(0.5, points, 14)
+    with pytest.raises(TwinError, match='no channel field'):
+        measured_exits(0.5, np.zeros(1, dtype=[('exit_time', '<f8')]), 14)
+    with pytest.raises(TwinError, match='10001 exits'):
+        measured_exits(0.5, np.zeros(10_001, dtype=[('channel', '<u4')]), 14)

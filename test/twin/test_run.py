@@ -170,6 +170,37 @@ def test_the_streams_are_read_from_a_recording(tmp_path: Path) -> None:
         load_twin(tmp_path / 'twin.yaml')
 
 
+def test_measured_exits_are_read_from_a_recording_or_a_csv(tmp_path: Path) -> None:
+    # the plant's outermost piece leaves at 0.77 s: its exit_events message is the channel
+    # sensor's; the twin's own exit explains it
+    places = [{'position': [x, y, 0.0], 'on_surface': True} for x, y in PLACES]
+    (tmp_path / 'scenario.yaml').write_text(yaml.safe_dump(
+        {'duration': 1.2, 'rotation': ROTATION, 'particles': places,
+         'output_interval': 1.0 / 30.0}))
+    recording = tmp_path / 'plant.mcap'
+    assert main(['run', str(tmp_path / 'scenario.yaml'), '--events',
+                 str(tmp_path / 'events.csv'), '--mcap', str(recording), '--quiet']) == 0
+    (event,) = read(tmp_path / 'events.csv')
+    twin = {'scenario': 'scenario.yaml', 'detections': 'plant.mcap', 'cone': 'plant.mcap',
+            'members': 4, 'sigma': 0.001, 'd_spread': 0.05, 'mu_C_spread': 0.01}
+    (tmp_path / 'twin.yaml').write_text(yaml.safe_dump({**twin, 'exits': 'plant.mcap'}))
+    spec = load_twin(tmp_path / 'twin.yaml')
+    assert spec.exits.tolist() == [[pytest.approx(float(event['t']), abs=1e-9),
+                                    int(event['channel'])]]
+    run_twin(spec, tmp_path / 'out')
+    frames = read(tmp_path / 'out' / 'frames.csv')
+    assert sum(int(f['measured']) for f in frames) == 1
+    assert sum(int(f['explained']) for f in frames) == 1
+    # a CSV's: a channel that is not one is refused in one line, the rest taken
+    (tmp_path / 'exits.csv').write_text(f"t,channel\n{event['t']},{event['channel']}\n"
+                                        '0.9,15\n')
+    (tmp_path / 'twin.yaml').write_text(yaml.safe_dump({**twin, 'exits': 'exits.csv'}))
+    logged: list[str] = []
+    run_twin(load_twin(tmp_path / 'twin.yaml'), tmp_path / 'csv', logged.append)
+    assert logged == ['exit refused: measured exit: channel 15 is not one of 1..14']
+    assert read(tmp_path / 'csv' / 'frames.csv') == frames
+
+
 def test_a_camera_s_track_ids_are_read_from_a_recording(tmp_path: Path) -> None:
     # camera_node's detections recorded: their track_id field becomes the fifth column
     points = np.zeros(3, dtype=DETECTION_DTYPE)

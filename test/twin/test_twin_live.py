@@ -137,6 +137,41 @@ def test_late_frames_give_what_the_frames_in_order_give() -> None:
     assert np.array_equal(ours.states[3].y, theirs.states[3].y)
 
 
+def test_a_late_measured_exit_gives_what_it_gives_in_order() -> None:
+    # two resting pieces; from 0.3 s the camera no longer sees the one at the rim, and a
+    # channel's sensor measured its exit at 0.3 s. Given in order, the frame of 0.4 s
+    # (EXIT_LAG after it) takes it; given after the frame of 0.5 s, the twin goes back to
+    # before the frame of 0.4 s and analyses again
+    settings = LiveSettings(twin=TwinSettings(members=4, sigma=0.001, seed=3),
+                            forecast_period=0.5)
+    channel = int(MODEL.channels.channel_of(0.0))
+    rng = np.random.default_rng(1)
+    frames = []
+    for k in range(1, 19):
+        t = k / 30.0
+        xy = np.array([[0.21, 0.0], [0.05, 0.05]] if t < 0.3 - 1e-9 else [[0.05, 0.05]])
+        frames.append(DetectionFrame(t, xy + rng.normal(0.0, 0.001, xy.shape), None, None))
+    twins = []
+    for late in (False, True):
+        follower = Follower(PARAMS, settings)
+        again: list[float] = []
+        for found in frames:
+            follower.frame(found)
+            follower.cone_speed(found.t, 0.0)
+            if abs(found.t - (0.3 if not late else 0.5)) < 1e-9:
+                again = follower.measured_exit(0.3, channel)
+        assert again == ([] if not late else [frames[k].t for k in (11, 12, 13, 14)])
+        twins.append(follower.twin)
+    ours, theirs = twins
+    assert theirs.pieces()[0].tolist() == ours.pieces()[0].tolist() == [1]
+    assert ours.t == theirs.t and ours.parameters() == theirs.parameters()
+    assert np.array_equal(ours.states[3].y, theirs.states[3].y)
+    with pytest.raises(ValueError, match='older than the twin can go back to'):
+        follower.measured_exit(0.1, channel)
+    with pytest.raises(ValueError, match='channel 15 is not one of'):
+        follower.measured_exit(0.55, 15)
+
+
 def camera(seconds: float, seed: int) -> list[tuple[float, float, DetectionFrame, np.ndarray]]:
     """
     Return a hard plant's (t, cone speed, frame, true x, y) at 30 frames/s.
