@@ -137,6 +137,10 @@ def main() -> None:
     parser.add_argument('--exits', action='store_true',
                         help="the twin takes the plant's exits as a channel's sensors report "
                              'them (measured exits)')
+    parser.add_argument('--dark', type=float, nargs=2, metavar=('START', 'END'),
+                        help='the camera is off from START to END s: the twin moves on by the '
+                             'model alone (open loop; with --exits, taking the measured '
+                             'exits), and the scores are also given over these forecasts')
     parser.add_argument('--truth', type=float, nargs=2, metavar=('D', 'MU_C'),
                         help="the plant's d and mu_C (default: the prior's)")
     args = parser.parse_args()
@@ -163,7 +167,7 @@ def main() -> None:
     masses: dict[float, dict] = {}  # forecast time: method -> (W, C) kg
     due = 2.0
     fed = 0  # the plant's exits given to the twin (with --exits)
-    explained = 0
+    explained = taken_dark = 0
     for t, ids, truth, seen_ids, xy in plant['frames']:
         twin.cone_speed(t, profile.omega(t))
         if args.exits:  # those measured up to the frame (an exit of the frame's step: its end)
@@ -171,7 +175,12 @@ def main() -> None:
             fed += len(new)
             for te, c in new:
                 twin.measured_exit(te, c)
-        explained += twin.update(t, xy).explained
+        if args.dark and args.dark[0] < t <= args.dark[1]:
+            twin.predict(t)
+            if args.exits:
+                taken_dark += len(twin.open_loop_exits())
+        else:
+            explained += twin.update(t, xy).explained
         for i, point in zip(seen_ids.tolist(), xy):
             tracks.setdefault(i, []).append((t, point))
         if t + 1e-9 < due or t > args.seconds - max(WINDOWS):
@@ -202,7 +211,8 @@ def main() -> None:
     wall = time.perf_counter() - start
     print(f'{len(exits)} exits, {len(picks)} forecasts, {wall:.1f} s wall', flush=True)
     if args.exits:
-        print(f'measured exits: {fed} given, {explained} explained', flush=True)
+        print(f'measured exits: {fed} given, {explained} explained in frames, '
+              f'{taken_dark} took a piece in the dark', flush=True)
     for lead in LEADS:
         cases, right = 0, {'twin': 0, 'open loop': 0, 'constant velocity': 0}
         for i, (te, channel) in exit_of.items():
@@ -224,6 +234,7 @@ def main() -> None:
     duration = args.seconds
     for w, window in enumerate(WINDOWS):
         errors: dict[str, list[float]] = {}
+        dark: dict[str, list[float]] = {}
         for tf, predicted in masses.items():
             actual = np.zeros(channels)
             last = np.zeros(channels)
@@ -236,11 +247,17 @@ def main() -> None:
                           'constant velocity': predicted['constant velocity'][w],
                           'persistence': last, 'climatology': total / duration * window,
                           'empty': np.zeros(channels)}
+            in_dark = bool(args.dark) and args.dark[0] < tf <= args.dark[1]
             for key, value in candidates.items():
                 errors.setdefault(key, []).append(float(np.abs(value - actual).sum()))
+                if in_dark:
+                    dark.setdefault(key, []).append(errors[key][-1])
         print(f'channel mass over {window:g} s, mean absolute error summed over channels '
               f'(kg): ' + ', '.join(f'{key} {np.mean(v):.3f}' for key, v in errors.items()),
               flush=True)
+        if dark:
+            print(f'  the {len(dark["twin"])} forecasts in the dark: ' + ', '.join(
+                f'{key} {np.mean(v):.3f}' for key, v in dark.items()), flush=True)
     print(calibration_line(), flush=True)
 
 

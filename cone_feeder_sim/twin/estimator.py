@@ -542,11 +542,8 @@ class Twin:
                 self.last_seen[i] = t
                 self.hits[i] = min(self.hits.get(i, 0) + 1, self.settings.confirm)
         self._window_frame(t, ids[match.pairs[:, 0]], detections[match.pairs[:, 1], :2], ids)
-        due = [e for e in self.pending_exits if e[0] <= t - EXIT_LAG]
-        self.pending_exits = self.pending_exits[len(due):]
-        measured = np.array(due, dtype=float).reshape(-1, 2)
         unseen = ~np.isin(ids, ids[match.pairs[:, 0]])
-        taken, left, explained = self._measured_exits(t, measured, ids[unseen], mean[unseen])
+        measured, taken, left, explained = self._measured_exits(t, ids[unseen], mean[unseen])
         exits += len(taken)
         seen_leaving += tuple(left)
         # a detection left over is a birth, unless it is within 3 sigma of the rim (a piece
@@ -573,18 +570,33 @@ class Twin:
             self._start_window(t)
         return Frame(t=t, associated=len(match.pairs), births=len(born), deaths=len(dead),
                      exits=exits, nis=nis, observed=observed, left=seen_leaving,
-                     measured=len(measured), explained=explained)
+                     measured=measured, explained=explained)
 
-    def _measured_exits(self, t: float, measured: np.ndarray, ids: np.ndarray,
-                        xy: np.ndarray) -> tuple[list[int], list[Exit], int]:
+    def open_loop_exits(self) -> tuple[Exit, ...]:
         """
-        Take measured exits (e, 2: t (s), channel); return what they took off the cone.
+        Take the measured exits due at the twin's time without a frame (the camera is off).
 
-        ids (n,) and xy (n, 2) (m, world): the pieces no detection of the frame was
-        associated with, and where the members' mean has them (see :meth:`update`). Returns
-        the pieces taken off (ids), the exits the twin saw among them (confirmed pieces) and
-        how many measured exits an exit of the twin's or a piece explained.
+        As :meth:`update` does, but any piece may be the one that left (no detection says
+        which are still there). Returns the exits the twin saw among the pieces taken off.
         """
+        ids, mean, _ = self.pieces(tentative=True)
+        _, _, left, _ = self._measured_exits(self.t, ids, mean)
+        return tuple(left)
+
+    def _measured_exits(self, t: float, ids: np.ndarray,
+                        xy: np.ndarray) -> tuple[int, list[int], list[Exit], int]:
+        """
+        Take the measured exits due at t (s); return what they did.
+
+        ids (n,) and xy (n, 2) (m, world): the pieces that may have left (no detection of
+        the frame was associated with them), and where the members' mean has them (see
+        :meth:`update`). Returns how many exits were taken, the pieces they took off (ids),
+        the exits the twin saw among them (confirmed pieces) and how many measured exits an
+        exit of the twin's or a piece explained.
+        """
+        due = [e for e in self.pending_exits if e[0] <= t - EXIT_LAG]
+        self.pending_exits = self.pending_exits[len(due):]
+        measured = np.array(due, dtype=float).reshape(-1, 2)
         self._recent_exits = [e for e in self._recent_exits if e[0] >= t - 1.0]
         explained = 0
         layout, radius = self.params.model.channels, self.params.model.r
@@ -624,7 +636,7 @@ class Twin:
                 left.append(Exit(piece=i, t=float(when), channel=channel, mass=self.masses[i]))
             explained += 1
         self._drop(taken)
-        return taken, left, explained
+        return len(due), taken, left, explained
 
     def _merge(self, t: float) -> list[int]:
         """

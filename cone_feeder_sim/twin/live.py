@@ -19,7 +19,8 @@ input (its time starts at that stamp), each accepted frame is analysed
 (:meth:`.estimator.Twin.update`), a forecast is made when ``forecast_period`` s of stream
 time have passed since the last, and a cone speed that arrives while no frame has come for
 ``open_loop_after`` s moves a copy of the twin on by itself (open loop: the forecasts go on
-from the model alone). Its state is one of
+from the model alone; it takes the measured exits as they come due, any of its pieces a
+candidate, :meth:`.estimator.Twin.open_loop_exits`). Its state is one of
 
 - ``waiting``: no input yet;
 - ``following``: frames arrive and most detections are associated;
@@ -140,6 +141,7 @@ class Follower:
         before = self._ahead.t
         self._ahead.cone_speed(t, omega)
         self._ahead.predict(t)
+        self._ahead.open_loop_exits()
         self._window['stream'] += t - before
         self._forecast_if_due(t, self._ahead)
         self._window['busy'] += time.perf_counter() - start
@@ -183,6 +185,8 @@ class Follower:
         if t > twin.t - EXIT_LAG:
             twin.measured_exit(t, channel)
             self._measured.append((t, channel))
+            if self._ahead is not None and t > self._ahead.t - EXIT_LAG:
+                self._ahead.measured_exit(t, channel)  # in the dark, the copy takes it too
             return []
         later = [k for k, (stamp, _, _) in enumerate(self._history) if stamp - EXIT_LAG >= t]
         if not later or self._history[later[0]][1].t - EXIT_LAG >= t:

@@ -130,6 +130,20 @@ def test_a_measured_exit_takes_the_unseen_piece_at_the_rim_of_its_channel() -> N
     assert frame.measured == 1 and frame.explained == 0 and len(twin.pieces()[0]) == 2
 
 
+def test_in_the_dark_a_measured_exit_takes_the_piece_at_the_rim_of_its_channel() -> None:
+    # no frame says which pieces are still there: any is a candidate, the nearest the rim
+    # of the channel goes
+    twin = rim_twin()
+    twin.measured_exit(0.1, int(MODEL.channels.channel_of(180.0)))  # no piece there
+    twin.measured_exit(0.15, int(MODEL.channels.channel_of(0.0)))
+    twin.predict(0.2)
+    assert twin.open_loop_exits() == ()
+    assert twin.pieces()[0].tolist() == [0, 1] and len(twin.pending_exits) == 1
+    twin.predict(0.25)
+    (left,) = twin.open_loop_exits()
+    assert left.piece == 0 and left.t == 0.15 and twin.pieces()[0].tolist() == [1]
+
+
 def test_a_frame_takes_the_exits_measured_up_to_exit_lag_before_it() -> None:
     twin = rim_twin()
     twin.measured_exit(0.2, int(MODEL.channels.channel_of(0.0)))

@@ -172,6 +172,27 @@ def test_a_late_measured_exit_gives_what_it_gives_in_order() -> None:
         follower.measured_exit(0.55, 15)
 
 
+def test_in_open_loop_the_moving_copy_takes_the_measured_exits() -> None:
+    follower = Follower(PARAMS, LiveSettings(twin=TwinSettings(members=4, sigma=0.001, seed=3),
+                                             forecast_period=0.5, open_loop_after=0.2))
+    channel = int(MODEL.channels.channel_of(0.0))
+    for k in range(1, 4):  # two resting pieces, one at the rim, seen until 0.1 s
+        follower.frame(DetectionFrame(k / 30.0, np.array([[0.21, 0.0], [0.05, 0.05]]), None,
+                                      None))
+        follower.cone_speed(k / 30.0, 0.0)
+    for k in range(4, 16):  # the camera is off; the rim piece's exit is measured at 0.3 s
+        t = k / 30.0
+        follower.cone_speed(t, 0.0)
+        if k == 10:
+            assert follower.state(t) == 'open loop'
+            follower.measured_exit(0.3, channel)
+        if k == 11:  # less than EXIT_LAG (0.1 s) after it: still there
+            assert follower.current.pieces()[0].tolist() == [0, 1]
+    assert follower.current.t == 0.5 and follower.current.pieces()[0].tolist() == [1]
+    # the twin waits at its last frame: the frame after the dark takes the exit
+    assert follower.twin.t == 0.1 and follower.twin.pending_exits == [(0.3, channel)]
+
+
 def camera(seconds: float, seed: int) -> list[tuple[float, float, DetectionFrame, np.ndarray]]:
     """
     Return a hard plant's (t, cone speed, frame, true x, y) at 30 frames/s.
