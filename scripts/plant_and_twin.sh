@@ -2,8 +2,9 @@
 # Run a plant and its twin side by side: sim_node (the feeder, on its default config),
 # camera_node standing in for the camera (its particle_states made into detections with
 # 2 mm of noise, misses, false detections, swapped track ids, 50-100 ms late) and twin_node
-# following it (the camera's detections, sim_node's cone_state as the encoder); sim_node and
-# twin_node record to runs/. Stop with Ctrl-C or SIGTERM: both finish their recordings. Then
+# following it (the camera's detections, sim_node's cone_state as the encoder, its
+# exit_events as the channels' sensors); sim_node and twin_node record to runs/. Stop with
+# Ctrl-C or SIGTERM: both finish their recordings. Then
 # open both MCAP files together in Foxglove (Open local file, select both: one timeline), or
 # watch live with foxglove_bridge where ROS 2 comes from apt (ros-jazzy-foxglove-bridge; it
 # is not on PyPI). A perfect camera: CAMERA_ARGS="-p sigma:=0.0 -p miss:=0.0 -p
