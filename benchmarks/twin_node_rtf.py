@@ -14,18 +14,18 @@
 """
 Benchmark: twin_node following sim_node live, on these cores, for ensemble sizes M.
 
-The plant is sim_node (no recording, no feed, no contact) with N pieces placed at random
-on the annulus 0.05-0.17 m, a cone reversing between -3 and 3 rad/s every 2 s (the pieces
-stay on it), its ``particle_states`` at 30 Hz (``update_rate`` 30) as the twin's
-detections. For each M a fresh twin_node runs 25 s; from its diagnostics of the last 15 s
-it prints the frames it took per second (30 keeps up), the real-time factor (the stream
-time it took per wall second), its capacity (stream seconds per second of computing), the
-p95 and the largest latency from a frame's arrival to the publication of its estimates,
-the association rate and the pieces followed::
+The plant is sim_node (no recording, no feed; contact between pieces as --contact, in the
+twin too) with N pieces placed at random on the annulus 0.05-0.17 m, a cone reversing
+between -3 and 3 rad/s every 2 s (the pieces stay on it), its ``particle_states`` at 30 Hz
+(``update_rate`` 30) as the twin's detections. For each M a fresh twin_node runs 25 s; from
+its diagnostics of the last 15 s it prints the frames it took per second (30 keeps up), the
+real-time factor (the stream time it took per wall second), its capacity (stream seconds
+per second of computing), the p95 and the largest latency from a frame's arrival to the
+publication of its estimates, the association rate and the pieces followed::
 
     .venv/bin/python benchmarks/twin_node_rtf.py [--pieces 30 60] [--members 4 8 16]
         [--twin-parameters 'smoother_pieces:=6' 'smoother_pieces:=2']
-        [--forecast-period 0.1] [--forecast-thread true false]
+        [--forecast-period 0.1] [--forecast-thread true false] [--contact false true]
 """
 
 import argparse
@@ -62,7 +62,7 @@ def stop(proc: subprocess.Popen) -> None:
 
 
 def case(pieces: int, members: int, period: float, domain: int, thread: bool,
-         extra: str = '') -> None:
+         extra: str = '', contact: bool = False) -> None:
     """Run the plant and a twin of M members; print the figures of the last 15 s."""
     rng = np.random.default_rng(pieces)
     r = np.sqrt(rng.uniform(0.05 ** 2, 0.17 ** 2, pieces))
@@ -70,7 +70,8 @@ def case(pieces: int, members: int, period: float, domain: int, thread: bool,
     positions = np.column_stack([r * np.cos(a), r * np.sin(a), np.full(pieces, 0.06)])
     plant = start([str(BIN / 'sim_node'), '--ros-args', '-p', "record_path:=''",
                    '-p', 'update_rate:=30.0', '-p', 'feed.rate:=0.0',
-                   '-p', 'interactions.enabled:=false', '-p', 'weigher.enabled:=false',
+                   '-p', f'interactions.enabled:={str(contact).lower()}',
+                   '-p', 'weigher.enabled:=false',
                    '-p', 'open_loop_pattern:=[2.0, -3.0, 2.0, 3.0]',
                    '-p', 'initial_pieces.positions:=['
                    + ', '.join(f'{v:.4f}' for v in positions.ravel()) + ']',
@@ -79,6 +80,7 @@ def case(pieces: int, members: int, period: float, domain: int, thread: bool,
                   '-p', "record_path:=''", '-p', f'members:={members}',
                   '-p', f'forecast_period:={period}',
                   '-p', f'forecast_thread:={str(thread).lower()}',
+                  '-p', f'interactions.enabled:={str(contact).lower()}',
                   *(part for item in extra.split() for part in ('-p', item))], domain)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
@@ -114,7 +116,8 @@ def case(pieces: int, members: int, period: float, domain: int, thread: bool,
     capacity = [float(row['real-time factor (capacity)']) for row in rows[1:]]
     association = [float(row['association rate']) for row in rows[1:]]
     states = sorted({row['state'] for row in rows})
-    print(f'N = {pieces}, M = {members}{", " + extra if extra else ""}, forecasts every '
+    print(f'N = {pieces}, M = {members}{", " + extra if extra else ""}, '
+          f'contact {"on" if contact else "off"}, forecasts every '
           f'{period:g} s '
           f'({"on their own thread" if thread else "in turn"}): '
           f'{frames / wall:.1f} frames/s taken (of 30), RTF {frames / wall / 30:.3f}, '
@@ -134,6 +137,8 @@ def main() -> None:
                         choices=['true', 'false'], help='twin_node forecast_thread values')
     parser.add_argument('--twin-parameters', nargs='+', default=[''],
                         help="twin_node parameters of each run in turn ('name:=value ...')")
+    parser.add_argument('--contact', nargs='+', default=['false'], choices=['true', 'false'],
+                        help='contact between pieces in the plant and the twin, in turn')
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     domain = 40 + os.getpid() % 50
@@ -141,8 +146,9 @@ def main() -> None:
         for members in args.members:
             for thread in args.forecast_thread:
                 for extra in args.twin_parameters:
-                    case(pieces, members, args.forecast_period, domain, thread == 'true',
-                         extra)
+                    for contact in args.contact:
+                        case(pieces, members, args.forecast_period, domain, thread == 'true',
+                             extra, contact == 'true')
     print(calibration_line(), flush=True)
 
 

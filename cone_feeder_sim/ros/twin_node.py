@@ -64,7 +64,7 @@ from ..formats.parameter_file import load_model_params
 from ..formats.pointcloud import cloud_points
 from ..formats.runlog import run_metadata
 from ..formats.topics import TWIN_TOPICS
-from ..physics.params import Limit, SolverParams
+from ..physics.params import INTERACTION_KEYS, InteractionParams, Limit, SolverParams
 from ..physics.simulation import SimParams
 from ..twin.estimator import parameter_note, TUNING, TwinSettings
 from ..twin.frames import cone_speed, detection_frame, MAX_FUTURE, measured_exits
@@ -131,7 +131,12 @@ def twin_parameter_specs(base: Any = None) -> list[ParamSpec]:
     for spec in parameter_specs(base):
         if spec.name == 'record_path':
             spec = replace(spec, default=spec.default.replace('sim_node', 'twin_node'))
-        if spec.name in SHARED or spec.name.startswith(('model.', 'solver.')):
+        if spec.name == 'interactions.enabled':  # sim_node's is on: the twin cannot afford it
+            spec = replace(spec, default=False, description=(
+                "contact between pieces in the twin's members (off: at 30 pieces and 4 "
+                'members the twin fell from 30 frames/s to under 1, doc/twin.md; the pair '
+                "law's other parameters are sim_node's)"))
+        if spec.name in SHARED or spec.name.startswith(('model.', 'solver.', 'interactions.')):
             specs.append(spec)
     return list(TWIN_PARAMETERS) + specs
 
@@ -155,7 +160,8 @@ class TwinNode(GuardedNode):
         horizons = tuple(float(h) for h in values['horizons'])
         if not horizons or not all(0.0 < h <= 60.0 for h in horizons):
             raise TwinError(f'horizons must be numbers in (0, 60] s, got {list(horizons)}')
-        model = model_from_values(values, base)
+        model = replace(model_from_values(values, base), interactions=InteractionParams(
+            **{key: values[f'interactions.{key}'] for key in INTERACTION_KEYS}))
         solver = SolverParams(**{name[len('solver.'):]: value for name, value in values.items()
                                  if name.startswith('solver.')})
         settings = TwinSettings(

@@ -292,6 +292,10 @@ class Twin:
         if not settings.loosen >= 1.0:
             raise ValueError(f'loosen must be at least 1, got {settings.loosen}')
         self.params, self.settings = loosened(params, settings.loosen), settings
+        #: the members' params without the pair law: the smoother's (see _start_window)
+        model = self.params.model
+        self._alone = replace(self.params, model=replace(
+            model, interactions=replace(model.interactions, enabled=False)))
         self.stop = stop or StopFlag()
         self.rng = np.random.default_rng(settings.seed)
         m = settings.members
@@ -319,9 +323,9 @@ class Twin:
         self._drifted = t0
         #: the window: its start (s); the smoother's members (None: nothing to weigh), run
         #: alongside the twin's: one state holding Q = P + M copies of each piece (id * Q +
-        #: k: the k-th value's, then each member's start), or, where pieces touch (contact
-        #: on), one state per copy; their predictions of the window's detections so far,
-        #: (P, k) per frame, and those detections (k,) (m, x and y of each piece)
+        #: k: the k-th value's, then each member's start); their predictions of the
+        #: window's detections so far, (P, k) per frame, and those detections (k,) (m, x and
+        #: y of each piece)
         self._window_t0 = t0
         self._smoother: list[SimState] | None = None
         #: the parameters' random walk over the window: (log d, mu_C) at its start and end
@@ -392,15 +396,17 @@ class Twin:
         self._profile = RotationProfile(np.array(self.times), np.array(self.omegas))
 
     def advance(self, states: list[SimState], t1: float,
-                profile: RotationProfile | None = None) -> list[StepResult]:
+                profile: RotationProfile | None = None,
+                params: SimParams | None = None) -> list[StepResult]:
         """
         Advance members' states to t1 (s) under profile (default: the measured cone speed).
 
-        Raises Stopped when :attr:`stop` was requested meanwhile (the interval is dropped).
+        params: default the members'. Raises Stopped when :attr:`stop` was requested
+        meanwhile (the interval is dropped).
         """
         m = len(states)
-        results = advance_many(states, self.params, [profile or self._profile] * m, [t1] * m,
-                               self.stop)
+        results = advance_many(states, params or self.params, [profile or self._profile] * m,
+                               [t1] * m, self.stop)
         if any(r.stopped for r in results):
             raise Stopped('the twin was asked to stop')
         return results
@@ -414,7 +420,11 @@ class Twin:
         """
         m = len(self.states)
         smoother = self._smoother or []
-        results = self.advance(self.states + smoother, t1)  # one compiled call for both
+        if smoother and self.params.model.interactions.enabled:  # the smoother's without it
+            results = self.advance(self.states, t1) + self.advance(smoother, t1,
+                                                                   params=self._alone)
+        else:
+            results = self.advance(self.states + smoother, t1)  # one compiled call for both
         if smoother:
             self._smoother = [r.state for r in results[m:]]
             for k, r in enumerate(results[m:]):
@@ -678,6 +688,14 @@ class Twin:
                 ids = ids[np.isin(ids, s.ids)]
         return ids
 
+    def _apart(self, state: SimState, ids: np.ndarray, reach: float) -> np.ndarray:
+        """Return whether each piece ids (n,) has no other piece of state within reach (m)."""
+        xy = state.y[:, :2]
+        rows = self._rows(state, ids)
+        distance = np.hypot(*(xy[rows, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+        distance[np.arange(len(rows)), rows] = np.inf
+        return np.all(distance > reach, axis=1)
+
     def _rows(self, state: SimState, ids: np.ndarray) -> np.ndarray:
         if np.array_equal(state.ids, ids):
             return np.arange(len(ids), dtype=np.int64)
@@ -796,6 +814,13 @@ class Twin:
         (:func:`window_log_likelihood`).
         A copy whose piece left the cone predicts it where it left, and a frame that does not
         see a piece costs the values whose copy holds it (:meth:`_window_frame`).
+
+        The Q copies of the pieces are in one state, run without the pair law (the copies of
+        a piece overlap), in one result. With contact on (the members' pair law), only
+        pieces with no other piece within 3 s0 in every member are weighed: a piece alone
+        slides as the copies do, until it meets another in the window. (Each copy in a
+        state of its own with the pair law, as before, cost 30 of 37 ms a frame at 10
+        pieces and 4 members, against 7 ms without contact: doc/twin.md.)
         """
         self._window_t0, self._predicted, self._observed = t, [], []
         self._observed_ids, self._anomalies, self._departed = [], [], {}
@@ -812,8 +837,11 @@ class Twin:
             return
         first = self.states[0]
         held = first.ids[np.all([np.isin(first.ids, s.ids) for s in self.states], axis=0)]
+        if self.params.model.interactions.enabled:  # the pieces apart from every other
+            reach = 3.0 * self.params.model.product.s0
+            held = held[np.all([self._apart(s, held, reach) for s in self.states], axis=0)]
         sliding = np.mean([np.linalg.norm(s.y[self._rows(s, held), 3:6], axis=1)
-                           for s in self.states], axis=0)
+                           for s in self.states], axis=0).reshape(len(held))
         held = np.sort(held[np.argsort(-sliding, kind='stable')[:self.settings.smoother_pieces]])
         if not len(held):  # every member holds pieces, but not one the same: nothing to weigh
             return
@@ -826,10 +854,7 @@ class Twin:
         members = ([self._with_products(replace(base, y=rows.mean(axis=0)), k, self._walk)
                     for k in range(p)]
                    + [self._with_products(replace(base, y=y), 0, mean) for y in rows])
-        if self.params.model.interactions.enabled:
-            self._smoother = members
-            return
-        # without contact the copies cannot meet: one state, and one result, for them all
+        # the copies in one state, run without the pair law (they overlap): one result
         n, q = base.count, len(members)
         self._smoother = [replace(
             base, y=np.stack([s.y for s in members], axis=1).reshape(n * q, -1),
@@ -876,28 +901,21 @@ class Twin:
 
     def _copies(self, ids: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray]:
         """
-        Return where the smoother's Q copies of pieces ids (n,) are, in either layout.
+        Return where the smoother's Q copies of pieces ids (n,) are.
 
         Returns on the cone (Q, n) bool, and world x, y (Q, n, 2) (m): where the copy is,
         where it left or failed (:attr:`_departed`), or NaN where it is neither (a piece
         the window does not hold).
         """
         q = len(self.log_d) + len(self.states)
-        if len(self._smoother) == 1:  # the copies of each piece in one state: id * Q + k
-            layout = [(0, ids[None, :] * q + np.arange(q)[:, None])]
-        else:  # one state per copy
-            layout = [(k, ids[None, :]) for k in range(q)]
-        present, at = [], []
-        for index, keys in layout:
-            state = self._smoother[index]
-            here = np.isin(keys, state.ids)
-            where = np.full(keys.shape + (2,), np.nan)
-            where[here] = self._world(state, keys[here], omega)[:, :2]
-            for a, b in zip(*np.nonzero(~here)):
-                where[a, b] = self._departed.get((index, int(keys[a, b])), np.nan)
-            present.append(here)
-            at.append(where)
-        return np.concatenate(present), np.concatenate(at)
+        (state,) = self._smoother  # the copies of each piece in one state: id * Q + k
+        keys = ids[None, :] * q + np.arange(q)[:, None]
+        here = np.isin(keys, state.ids)
+        where = np.full(keys.shape + (2,), np.nan)
+        where[here] = self._world(state, keys[here], omega)[:, :2]
+        for a, b in zip(*np.nonzero(~here)):
+            where[a, b] = self._departed.get((0, int(keys[a, b])), np.nan)
+        return here, where
 
     def _product(self, member: int, mass: float, parameters: Walk | None = None) -> ProductParams:
         log_d, mu_c = parameters or (self.log_d, self.mu_c)

@@ -326,20 +326,10 @@ def test_a_window_weighs_the_values_of_d_and_mu_c_by_the_fastest_sliding_pieces(
         assert np.all(copies.products[[16 + j, 36 + j], P_D]
                       == pytest.approx(np.exp(np.mean(twin._walk[0]))))
         assert np.array_equal(copies.y[[16 + j, 36 + j]], starts[j])
-    # the copies predict what one state per copy predicts (the layout for contact), bit for
-    # bit: pieces apart are integrated alike in either
-    apart = twin.snapshot()
-    apart._smoother = [replace(copies, y=copies.y[[k, 20 + k]], ids=np.array([0, 2]),
-                               products=copies.products[[k, 20 + k]],
-                               step_size=copies.step_size[[k, 20 + k]], next_id=3)
-                       for k in range(20)]
     for t in (1 / 30, 2 / 30):
-        frame = np.array([[0.10, 0.0], [0.0, 0.11], [-0.12, 0.0]])
-        twin.update(t, frame)
-        apart.update(t, frame)
-    assert len(twin._predicted) == len(apart._predicted) == 2
-    for a, b in zip(twin._predicted + twin._anomalies, apart._predicted + apart._anomalies):
-        assert a.shape in ((16, 4), (4, 4)) and np.array_equal(a, b)
+        twin.update(t, np.array([[0.10, 0.0], [0.0, 0.11], [-0.12, 0.0]]))
+    assert [a.shape for a in twin._predicted] == [(16, 4)] * 2
+    assert [a.shape for a in twin._anomalies] == [(4, 4)] * 2
 
 
 def test_a_value_that_sends_a_seen_piece_off_the_cone_is_weighed_where_it_left() -> None:
@@ -351,21 +341,11 @@ def test_a_value_that_sends_a_seen_piece_off_the_cone_is_weighed_where_it_left()
     assert twin._smoother is not None and len(twin._smoother) == 1
     copies = twin._smoother[0]
     assert copies.ids.tolist() == list(range(12))  # 8 values, then 4 members' starts
-    # the same copies one state each (the layout for contact): the same predictions
-    apart = twin.snapshot()
-    apart._smoother = [replace(copies, y=copies.y[[k]], ids=np.array([0]),
-                               products=copies.products[[k]],
-                               step_size=copies.step_size[[k]], next_id=1)
-                       for k in range(12)]
     # the copies of values 0 and 1 are sent outwards at 1 m/s: they leave within a frame
-    for smoother, rows in ((twin._smoother, [(0, 0), (0, 1)]),
-                           (apart._smoother, [(0, 0), (1, 0)])):
-        for state, row in rows:
-            smoother[state] = replace(smoother[state], y=smoother[state].y.copy())
-            smoother[state].y[row, 3:5] = [1.0, 0.0]
+    twin._smoother = [replace(copies, y=copies.y.copy())]
+    twin._smoother[0].y[:2, 3:5] = [1.0, 0.0]
     for t in (1 / 30, 2 / 30, 3 / 30):
         twin.update(t, place)  # the camera still sees the piece where it was
-        apart.update(t, place)
     assert twin._smoother[0].count == 10 and len(twin._departed) == 2
     # the piece still counts: the values whose copy left predict it where it left
     assert [a.shape for a in twin._predicted] == [(8, 2)] * 3
@@ -375,8 +355,6 @@ def test_a_value_that_sends_a_seen_piece_off_the_cone_is_weighed_where_it_left()
     for predicted in twin._predicted:
         assert np.all(np.hypot(*predicted[:2].T) > 0.215)  # on the way or gone
         assert np.all(np.abs(predicted[2:] - place) < 0.002)  # where it is seen
-    for a, b in zip(twin._predicted + twin._anomalies, apart._predicted + apart._anomalies):
-        assert np.array_equal(a, b)
     # and are weighed down by it
     log_likelihood = window_log_likelihood(
         np.concatenate(twin._predicted, axis=1) - np.concatenate(twin._observed),
@@ -393,34 +371,19 @@ def one_piece_window(x: float) -> Twin:
     return twin
 
 
-def one_state_per_copy(twin: Twin) -> Twin:
-    """Return a copy of the twin whose smoother has each copy in a state of its own."""
-    (copies,) = twin._smoother
-    q = len(twin.log_d) + len(twin.states)
-    apart = twin.snapshot()
-    apart._smoother = [replace(copies, y=copies.y[k::q], ids=copies.ids[k::q] // q,
-                               products=copies.products[k::q],
-                               step_size=copies.step_size[k::q],
-                               next_id=int(copies.ids.max()) // q + 1) for k in range(q)]
-    return apart
-
-
 def test_a_value_that_keeps_a_piece_the_camera_no_longer_sees_is_weighed_down(
         monkeypatch: pytest.MonkeyPatch) -> None:
     twin = one_piece_window(0.20)  # at rest near the rim, the cone at rest
     copies = twin._smoother[0]
     twin._smoother = [replace(copies, y=copies.y.copy())]
     twin._smoother[0].y[:2, 3:5] = [1.0, 0.0]  # the copies of values 0 and 1 leave
-    apart = one_state_per_copy(twin)  # the layout for contact
     nothing = np.zeros((0, 2))
     for k in range(1, 5):  # and the camera sees the piece no more
         twin.update(k / 30, nothing)
-        apart.update(k / 30, nothing)
     assert twin.pieces()[0].tolist() == [0] and len(twin._departed) == 2
     # every frame costs the values whose copy holds the piece; those whose copy left, less
     assert np.all(twin._missed[2:] == 4 * MISSED_FRAME)
     assert np.all(twin._missed[:2] >= 3 * MISSED_FRAME)
-    assert np.array_equal(apart._missed, twin._missed)
     later = twin.snapshot()  # a rewind's copy goes on apart
     later._missed += 1.0
     later._departed.clear()
@@ -475,21 +438,30 @@ def test_the_note_names_too_few_values_of_d_and_mu_c() -> None:
     assert 'window 0' in parameter_note(TwinSettings(window=0.0))
 
 
-def test_with_the_pair_law_on_each_smoother_member_is_a_state_of_its_own() -> None:
-    # copies of one piece in one state would touch: with contact each value, and each
-    # member's start, runs in a state of its own
+def test_with_the_pair_law_on_the_smoother_weighs_pieces_apart_without_it() -> None:
+    # copies of one piece in one state overlap: they run without the pair law, and only
+    # the pieces that touch no other (within 3 s0) are weighed
     touching = replace(MODEL, interactions=replace(MODEL.interactions, enabled=True))
     twin = Twin(SimParams(model=touching), TwinSettings(members=4, particles=8, sigma=0.001,
-                                                        smoother_pieces=1, seed=5))
-    frame = np.array([[0.10, 0.0], [-0.12, 0.0]])
+                                                        smoother_pieces=3, drift=0.0, seed=5))
+    gap = 2.5 * MODEL.product.s0
+    frame = np.array([[0.10, 0.0], [0.10, gap], [-0.12, 0.0]])  # two close, one apart
     twin.update(0.0, frame)
+    twin.log_d[:], twin.mu_c[:] = np.log(225.0), 0.85  # every value the same
     twin._start_window(0.0)
-    assert twin._smoother is not None and len(twin._smoother) == 8 + 4
-    assert all(s.ids.tolist() == [0] for s in twin._smoother)
+    assert twin._smoother is not None and len(twin._smoother) == 1
+    assert twin._window_pieces.tolist() == [2]
+    twin.states = [replace(s, y=s.y.copy()) for s in twin.states]
+    slide = np.array([0.3, 0.0])  # the cone at rest: the piece and its copies slide
+    copies = twin._smoother[0]
+    twin._smoother = [replace(copies, y=copies.y.copy())]
+    twin._smoother[0].y[:, 3:5] = slide
     for t in (1 / 30, 2 / 30):
         twin.update(t, frame)
+    # 8 copies in one place, with one value: with the pair law they would push apart
     assert [a.shape for a in twin._predicted] == [(8, 2)] * 2
-    assert [a.shape for a in twin._anomalies] == [(4, 2)] * 2
+    assert np.ptp(twin._predicted[-1], axis=0).max() == 0.0
+    assert np.hypot(*(twin._predicted[-1][0] - frame[2])) > 0.001  # and they slid
 
 
 def test_a_window_without_a_piece_every_member_holds_weighs_nothing() -> None:
