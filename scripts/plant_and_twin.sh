@@ -8,7 +8,8 @@
 # open both MCAP files together in Foxglove (Open local file, select both: one timeline), or
 # watch live with foxglove_bridge where ROS 2 comes from apt (ros-jazzy-foxglove-bridge; it
 # is not on PyPI). A perfect camera: CAMERA_ARGS="-p sigma:=0.0 -p miss:=0.0 -p
-# false_rate:=0.0 -p swap:=0.0 -p delay:=0.0 -p jitter:=0.0".
+# false_rate:=0.0 -p swap:=0.0 -p delay:=0.0 -p jitter:=0.0". The twin with the plant's
+# contact between pieces: TWIN_ARGS="-p interactions.enabled:=true" (doc/twin.md: its cost).
 #   bash scripts/plant_and_twin.sh [seconds]     (default: until stopped)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,7 +19,8 @@ plant=$!
 # shellcheck disable=SC2086  # CAMERA_ARGS: several words
 "$BIN/camera_node" --ros-args ${CAMERA_ARGS:-} &
 camera=$!
-"$BIN/twin_node" &
+# shellcheck disable=SC2086  # TWIN_ARGS: several words
+"$BIN/twin_node" --ros-args ${TWIN_ARGS:-} &
 twin=$!
 stop() {
   kill -TERM "$twin" "$camera" "$plant" 2>/dev/null || true

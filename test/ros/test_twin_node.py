@@ -24,7 +24,7 @@ from cone_feeder_sim.formats.cdr import CdrCodec
 from cone_feeder_sim.formats.mcap_reader import open_recording, parse_run_source
 from cone_feeder_sim.formats.messages import cloud_message, cone_state_message, header
 from cone_feeder_sim.formats.pointcloud import cloud_points, EXIT_DTYPE, NO_TRACK, STATE_DTYPE
-from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.params import INTERACTION_KEYS, ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
@@ -168,6 +168,21 @@ def test_the_estimator_settings_are_node_parameters() -> None:
     assert set(TUNING) | {'members', 'sigma', 'seed'} <= names
     assert set(TUNING) | {'members', 'sigma', 'seed', 'd', 'mu_C'} == {
         f.name for f in fields(TwinSettings)}
+
+
+def test_the_pair_law_is_sim_node_s_and_off_unless_set(context: Any, tmp_path: Path) -> None:
+    specs = {spec.name: spec for spec in twin_parameter_specs()}
+    assert specs['interactions.enabled'].default is False
+    assert {f'interactions.{key}' for key in INTERACTION_KEYS} <= set(specs)
+    for overrides, enabled in (({}, False), ({'interactions.enabled': True,
+                                              'interactions.friction': 0.3}, True)):
+        twin = twin_node(context, tmp_path, record_path='', **overrides)
+        try:
+            law = twin._follower.params.model.interactions
+            assert law.enabled is enabled
+            assert law.friction == overrides.get('interactions.friction', 0.5)
+        finally:
+            twin.destroy_node()
 
 
 def test_bad_inputs_are_refused_and_the_twin_goes_on(context: Any, tmp_path: Path) -> None:
