@@ -37,6 +37,7 @@ explained is printed::
 
     .venv/bin/python benchmarks/twin_forecast_scores.py [--seconds 12] [--members 16] [--seed 1]
         [--truth 315 0.78] [--particles 32] [--smoother-pieces 6] [--exits]
+        [--loosen 10]
 """
 
 import argparse
@@ -134,6 +135,8 @@ def main() -> None:
     parser.add_argument('--seed', type=int, default=1, help="the twin's seed")
     parser.add_argument('--particles', type=int, default=TwinSettings.particles)
     parser.add_argument('--smoother-pieces', type=int, default=TwinSettings.smoother_pieces)
+    parser.add_argument('--loosen', type=float, default=TwinSettings.loosen,
+                        help="the members' solver tolerances times this")
     parser.add_argument('--exits', action='store_true',
                         help="the twin takes the plant's exits as a channel's sensors report "
                              'them (measured exits)')
@@ -161,7 +164,8 @@ def main() -> None:
     channels = model.channels.count
     twin = Twin(params, TwinSettings(members=args.members, sigma=0.002, seed=args.seed,
                                      particles=args.particles,
-                                     smoother_pieces=args.smoother_pieces))
+                                     smoother_pieces=args.smoother_pieces,
+                                     loosen=args.loosen))
     tracks: dict[int, list] = {}
     picks: dict[float, dict] = {}  # forecast time: plant id -> (twin, line) channels
     masses: dict[float, dict] = {}  # forecast time: method -> (W, C) kg

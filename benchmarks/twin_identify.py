@@ -24,7 +24,7 @@ spreads and the errors in spreads (z), for the window smoother (``window`` 0.5 s
 default) and the frame-by-frame analysis (``window`` 0)::
 
     .venv/bin/python benchmarks/twin_identify.py [--seconds 6] [--members 32] [--speed 6 8]
-        [--window 0.5 0] [--particles 32] [--smoother-pieces 6] [--seed 1]
+        [--window 0.5 0] [--particles 32] [--smoother-pieces 6] [--seed 1] [--loosen 10]
 """
 
 import argparse
@@ -91,9 +91,12 @@ def main() -> None:
     parser.add_argument('--seed', type=int, default=1, help="the twin's seed")
     parser.add_argument('--particles', type=int, default=TwinSettings.particles)
     parser.add_argument('--smoother-pieces', type=int, default=TwinSettings.smoother_pieces)
+    parser.add_argument('--loosen', type=float, default=TwinSettings.loosen,
+                        help="the members' solver tolerances times this")
     args = parser.parse_args()
     settings = TwinSettings(members=args.members, sigma=0.001, mu_C_spread=0.15, seed=args.seed,
-                            particles=args.particles, smoother_pieces=args.smoother_pieces)
+                            particles=args.particles, smoother_pieces=args.smoother_pieces,
+                            loosen=args.loosen)
     print(calibration_line(), flush=True)
     warm_up()
     for speed in args.speed:

@@ -145,7 +145,7 @@ def test_the_twin_follows_the_plant_and_forecasts(context: Any, tmp_path: Path) 
     (tmp_path / 'replay.yaml').write_text(yaml.safe_dump(
         {'scenario': 'scenario.yaml', 'detections': 'twin.mcap', 'cone': 'twin.mcap',
          'members': 8, 'sigma': 0.001, 'd_spread': 0.05, 'mu_C_spread': 0.01,
-         'every': 1.0 / 30.0}))
+         'loosen': 100.0, 'every': 1.0 / 30.0}))  # the node's loosen: not the file's
     run_twin(load_twin(tmp_path / 'replay.yaml'), tmp_path / 'replay')
     node_twin = twin._follower.twin
     with (tmp_path / 'replay' / 'parameters.csv').open(newline='') as stream:
