@@ -607,7 +607,6 @@ class Twin:
         due = [e for e in self.pending_exits if e[0] <= t - EXIT_LAG]
         self.pending_exits = self.pending_exits[len(due):]
         measured = np.array(due, dtype=float).reshape(-1, 2)
-        self._recent_exits = [e for e in self._recent_exits if e[0] >= t - 1.0]
         explained = 0
         layout, radius = self.params.model.channels, self.params.model.r
         taken: list[int] = []
@@ -628,7 +627,7 @@ class Twin:
             start, end = np.radians(layout.sector_edges(channel))
             angle = np.arctan2(xy[:, 1], xy[:, 0])
             offset = np.mod(angle - start, 2.0 * np.pi)  # from the sector's start, ccw
-            width = np.mod(end - start, 2.0 * np.pi)
+            width = math.radians(layout.width)
             # the nearest point of the channel's stretch of rim: inside it, at the piece's
             # angle, else at the nearer edge
             nearest = np.where(offset <= width, angle,
@@ -646,6 +645,10 @@ class Twin:
                 left.append(Exit(piece=i, t=float(when), channel=channel, mass=self.masses[i]))
             explained += 1
         self._drop(taken)
+        # the exits still to come are after t - EXIT_LAG: none can match an older one of
+        # the twin's (pruned after the matching: a frame after a long gap matches its own)
+        self._recent_exits = [e for e in self._recent_exits
+                              if e[0] >= t - EXIT_LAG - EXIT_MATCH]
         return len(due), taken, left, explained
 
     def _merge(self, t: float) -> list[int]:

@@ -38,6 +38,7 @@ default) the forecast is made in the call that finds it due: deterministic, for 
 the headless run.
 """
 
+import bisect
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -181,12 +182,15 @@ class Follower:
         back to the twin before it, as a late frame does. Raises ValueError for a channel not
         in the layout, or an exit older than the history.
         """
+        if not math.isfinite(t):
+            raise ValueError(f'measured exit at t = {t} s: not finite')
         twin = self._start(t)
         if t > twin.t - EXIT_LAG:
             twin.measured_exit(t, channel)
             self._measured.append((t, channel))
-            if self._ahead is not None and t > self._ahead.t - EXIT_LAG:
-                self._ahead.measured_exit(t, channel)  # in the dark, the copy takes it too
+            if self._ahead is not None:  # in the dark, the copy takes it too, now if due
+                bisect.insort(self._ahead.pending_exits, (t, int(channel)))
+                self._ahead.open_loop_exits()
             return []
         later = [k for k, (stamp, _, _) in enumerate(self._history) if stamp - EXIT_LAG >= t]
         if not later or self._history[later[0]][1].t - EXIT_LAG >= t:

@@ -223,11 +223,16 @@ def test_bad_inputs_are_refused_and_the_twin_goes_on(context: Any, tmp_path: Pat
                                          cloud_message(header(0.17, 'feeder'), exits)))
         assert plant.spin_until(lambda: len(logged) >= 6)
         assert any('a channel not in 1..14' in line for line in logged)
-        exits['channel'][1] = 4  # a good one: the twin waits to take it
+        # good ones (the twin waits to take them), and one older than its history: refused
+        # alone
+        exits = np.zeros(3, dtype=EXIT_DTYPE)
+        exits['exit_time'], exits['channel'] = [0.15, 0.16, -0.1], [3, 4, 5]
         plant.exits.publish(CODEC.encode('sensor_msgs/msg/PointCloud2',
                                          cloud_message(header(0.17, 'feeder'), exits)))
         assert plant.spin_until(lambda: len(twin._follower.twin.pending_exits) == 2)
         assert twin._follower.twin.pending_exits == [(0.15, 3), (0.16, 4)]
+        assert plant.spin_until(lambda: any('older than the twin can go back' in line
+                                            for line in logged))
         assert any('not finite' in line for line in logged)
         assert any("frame_id 'camera'" in line for line in logged)
         assert any('from the future' in line for line in logged)

@@ -95,9 +95,9 @@ def test_a_piece_that_leaves_the_plant_leaves_the_twin(followed: tuple) -> None:
     assert len(twin.pieces()[0]) == frames[-1][1]
 
 
-def rim_twin() -> Twin:
+def rim_twin(params: SimParams = PARAMS) -> Twin:
     """Return a twin of two resting pieces, one 15 mm from the rim at angle 0, seen at 0."""
-    twin = Twin(PARAMS, TwinSettings(members=4, sigma=SIGMA, confirm=1, seed=4))
+    twin = Twin(params, TwinSettings(members=4, sigma=SIGMA, confirm=1, seed=4))
     twin.cone_speed(0.0, 0.0)
     twin.update(0.0, np.array([[0.21, 0.0], [0.05, 0.05]]))
     return twin
@@ -128,6 +128,27 @@ def test_a_measured_exit_takes_the_unseen_piece_at_the_rim_of_its_channel() -> N
     twin.measured_exit(0.1, channel)
     frame = twin.update(0.1 + EXIT_LAG, np.array([[0.21, 0.0], [0.05, 0.05]]))
     assert frame.measured == 1 and frame.explained == 0 and len(twin.pieces()[0]) == 2
+
+
+def test_one_channel_takes_the_rim_piece_wherever_it_is() -> None:
+    one = SimParams(model=replace(MODEL, channels=replace(MODEL.channels, count=1)))
+    twin = rim_twin(one)
+    twin.measured_exit(0.1, 1)
+    frame = twin.update(0.1 + EXIT_LAG, np.array([[0.05, 0.05]]))
+    assert frame.exits == 1 and twin.pieces()[0].tolist() == [1]
+
+
+def test_after_a_long_gap_the_twin_s_own_exit_still_explains_the_measured_one() -> None:
+    # the twin let the piece leave at 0.5 s, in the channel the sensor measured; the next
+    # frame comes 1.15 s later (a camera that stopped): the exit is the twin's own, and no
+    # other piece near the rim is taken for it
+    channel = int(MODEL.channels.channel_of(0.0))
+    twin = rim_twin()
+    twin._recent_exits.append((0.5, channel))
+    twin.measured_exit(0.5, channel)
+    frame = twin.update(1.65, np.array([[0.05, 0.05]]))
+    assert frame.measured == frame.explained == 1
+    assert frame.exits == 0 and frame.left == ()
 
 
 def test_in_the_dark_a_measured_exit_takes_the_piece_at_the_rim_of_its_channel() -> None:

@@ -191,6 +191,18 @@ def test_in_open_loop_the_moving_copy_takes_the_measured_exits() -> None:
     assert follower.current.t == 0.5 and follower.current.pieces()[0].tolist() == [1]
     # the twin waits at its last frame: the frame after the dark takes the exit
     assert follower.twin.t == 0.1 and follower.twin.pending_exits == [(0.3, channel)]
+    # a report that comes after the copy moved EXIT_LAG past it: the copy takes it at once
+    late = Follower(PARAMS, follower.settings)
+    for k in range(1, 16):
+        t = k / 30.0
+        if k < 4:
+            late.frame(DetectionFrame(t, np.array([[0.21, 0.0], [0.05, 0.05]]), None, None))
+        late.cone_speed(t, 0.0)
+    assert late.current.pieces()[0].tolist() == [0, 1]
+    assert late.measured_exit(0.3, channel) == []
+    assert late.current.pieces()[0].tolist() == [1]
+    with pytest.raises(ValueError, match='not finite'):
+        late.measured_exit(float('nan'), channel)
 
 
 def camera(seconds: float, seed: int) -> list[tuple[float, float, DetectionFrame, np.ndarray]]:
