@@ -138,16 +138,21 @@ def test_a_bad_twin_file_is_named(tmp_path: Path, capsys: pytest.CaptureFixture,
     assert message in capsys.readouterr().err
 
 
+def record_plant(folder: Path, places: list, seconds: float) -> Path:
+    """Run the headless runner on the pieces; return its recording (events.csv beside it)."""
+    (folder / 'scenario.yaml').write_text(yaml.safe_dump(
+        {'duration': seconds, 'rotation': ROTATION, 'output_interval': 1.0 / 30.0,
+         'particles': [{'position': [x, y, 0.0], 'on_surface': True} for x, y in places]}))
+    recording = folder / 'plant.mcap'
+    assert main(['run', str(folder / 'scenario.yaml'), '--events', str(folder / 'events.csv'),
+                 '--mcap', str(recording), '--quiet']) == 0
+    return recording
+
+
 def test_the_streams_are_read_from_a_recording(tmp_path: Path) -> None:
     # the headless runner's recording stands in for a camera's and an encoder's: its
     # particle_states are the detections, its cone_state the cone speed
-    places = [{'position': [x, y, 0.0], 'on_surface': True} for x, y in PLACES[:4]]
-    (tmp_path / 'scenario.yaml').write_text(yaml.safe_dump(
-        {'duration': 1.0, 'rotation': ROTATION, 'particles': places,
-         'output_interval': 1.0 / 30.0}))
-    recording = tmp_path / 'plant.mcap'
-    assert main(['run', str(tmp_path / 'scenario.yaml'), '--events',
-                 str(tmp_path / 'events.csv'), '--mcap', str(recording), '--quiet']) == 0
+    recording = record_plant(tmp_path, PLACES[:4], 1.0)
     (tmp_path / 'twin.yaml').write_text(yaml.safe_dump(
         {'scenario': 'scenario.yaml', 'detections': 'plant.mcap', 'cone': 'plant.mcap',
          'members': 8, 'sigma': 0.001}))
@@ -173,13 +178,7 @@ def test_the_streams_are_read_from_a_recording(tmp_path: Path) -> None:
 def test_measured_exits_are_read_from_a_recording_or_a_csv(tmp_path: Path) -> None:
     # the plant's outermost piece leaves at 0.77 s: its exit_events message is the channel
     # sensor's; the twin's own exit explains it
-    places = [{'position': [x, y, 0.0], 'on_surface': True} for x, y in PLACES]
-    (tmp_path / 'scenario.yaml').write_text(yaml.safe_dump(
-        {'duration': 1.2, 'rotation': ROTATION, 'particles': places,
-         'output_interval': 1.0 / 30.0}))
-    recording = tmp_path / 'plant.mcap'
-    assert main(['run', str(tmp_path / 'scenario.yaml'), '--events',
-                 str(tmp_path / 'events.csv'), '--mcap', str(recording), '--quiet']) == 0
+    record_plant(tmp_path, PLACES, 1.2)
     (event,) = read(tmp_path / 'events.csv')
     twin = {'scenario': 'scenario.yaml', 'detections': 'plant.mcap', 'cone': 'plant.mcap',
             'members': 4, 'sigma': 0.001, 'd_spread': 0.05, 'mu_C_spread': 0.01}
