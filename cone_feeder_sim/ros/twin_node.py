@@ -231,22 +231,31 @@ class TwinNode(GuardedNode):
     def _took(self, t: float, arrival: float) -> None:
         self._lead = t - arrival if self._lead is None else max(self._lead, t - arrival)
 
+    def _received(self, name: str, data: bytes) -> tuple[dict[str, Any], float]:
+        """Decode a message of table topic name, record it; return it and its stamp (s)."""
+        msg = self._codec.decode(TWIN_TOPICS[name].type_name, data, strict=False)
+        t = _seconds(msg['header']['stamp'])
+        self._outputs.received(name, data, round(t * 1e9))
+        return msg, t
+
+    def _not_ahead(self, what: str, t: float, arrival: float) -> None:
+        """Raise TwinError if the stamp t (s) is from the future (see :meth:`_latest`)."""
+        latest = self._latest(arrival)
+        if latest is not None and t > latest + MAX_FUTURE:
+            raise TwinError(f'{what} at t = {t:.4f} s refused: a stamp from the future '
+                            f'({t - latest:.3f} s ahead of the newest input)')
+
     def _refuse(self, text: str) -> None:
         self._refused += 1
         self.get_logger().warning(text, throttle_duration_sec=1.0)
 
     def _on_cone_state(self, data: bytes, info: Any) -> None:
         """Take the measured cone speed: frames that waited for it go on; open loop."""
-        msg = self._codec.decode('sensor_msgs/msg/JointState', data, strict=False)
-        t = _seconds(msg['header']['stamp'])
-        self._outputs.received('cone_state', data, round(t * 1e9))
+        msg, t = self._received('cone_state', data)
         arrival = _arrival(info)
-        latest = self._latest(arrival)
         before = self._follower.outlook
         try:
-            if latest is not None and t > latest + MAX_FUTURE:
-                raise TwinError(f'cone speed at t = {t:.4f} s refused: a stamp from the future '
-                                f'({t - latest:.3f} s ahead of the newest input)')
+            self._not_ahead('cone speed', t, arrival)
             omega = cone_speed(t, list(msg['name']), [float(v) for v in msg['velocity']])
             taken = self._follower.cone_speed(t, omega)
         except Stopped:
@@ -262,9 +271,7 @@ class TwinNode(GuardedNode):
         """Take a frame of detections: check it, hand it to the twin, publish what it did."""
         arrival = _arrival(info)
         try:
-            msg = self._codec.decode('sensor_msgs/msg/PointCloud2', data, strict=False)
-            t = _seconds(msg['header']['stamp'])
-            self._outputs.received('detections', data, round(t * 1e9))
+            msg, t = self._received('detections', data)
             found = detection_frame(t, cloud_points(msg), msg['header']['frame_id'],
                                     self._frame_id, self._latest(arrival))
             self._arrivals[t] = round(arrival * 1e9)  # until the frame is taken
@@ -286,13 +293,8 @@ class TwinNode(GuardedNode):
         """Take measured exits: a frame stamped EXIT_LAG s after each takes it."""
         arrival = _arrival(info)
         try:
-            msg = self._codec.decode('sensor_msgs/msg/PointCloud2', data, strict=False)
-            t = _seconds(msg['header']['stamp'])
-            self._outputs.received('exit_events', data, round(t * 1e9))
-            latest = self._latest(arrival)
-            if latest is not None and t > latest + MAX_FUTURE:
-                raise TwinError(f'exits at t = {t:.4f} s refused: a stamp from the future '
-                                f'({t - latest:.3f} s ahead of the newest input)')
+            msg, t = self._received('exit_events', data)
+            self._not_ahead('exits', t, arrival)
             exits = measured_exits(t, cloud_points(msg), self._model.channels.count)
         except (ConeFeederError, ValueError) as exc:
             self._refuse(str(exc))  # the message is refused whole
