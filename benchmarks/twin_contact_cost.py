@@ -30,23 +30,17 @@ import time
 
 from calibration import calibration_line
 from cone_feeder_sim.physics.params import InteractionParams, ModelParams
-from cone_feeder_sim.physics.simulation import (
-    add_particles, advance, resting_height, SimParams, SimState, warm_up, world_from_cone)
+from cone_feeder_sim.physics.simulation import advance, SimParams, warm_up, world_from_cone
 from cone_feeder_sim.twin.estimator import Twin, TwinSettings
 import numpy as np
-from twin_headless import reversing_profile
+from twin_headless import plant_start, reversing_profile
 
 
 def frames(pieces: int, seconds: float) -> list[tuple[float, float, np.ndarray]]:
     """Return the plant's (t, cone speed, detections (n, 2)) at 30 frames/s."""
     model = replace(ModelParams(), interactions=InteractionParams(enabled=True))
     params = SimParams(model=model)
-    rng = np.random.default_rng(30)
-    r = np.sqrt(rng.uniform(0.05 ** 2, 0.17 ** 2, pieces))
-    a = rng.uniform(0.0, 2.0 * np.pi, pieces)
-    q = np.array([[x, y, resting_height(model, model.product, x, y)]
-                  for x, y in zip(r * np.cos(a), r * np.sin(a))])
-    plant, _ = add_particles(SimState(), params, q)
+    plant, rng = plant_start(params, pieces)
     profile = reversing_profile(seconds)
     out = []
     for k in range(1, int(round(30 * seconds)) + 1):

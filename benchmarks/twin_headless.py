@@ -55,12 +55,12 @@ def reversing_profile(seconds: float) -> RotationProfile:
     return RotationProfile.from_table(table)
 
 
-def plant_start(params: SimParams) -> tuple[SimState, np.random.Generator]:
-    """Return the plant's 30 pieces at rest on the annulus, and the stream's noise source."""
+def plant_start(params: SimParams, pieces: int = 30) -> tuple[SimState, np.random.Generator]:
+    """Return the plant's pieces at rest on the annulus, and the stream's noise source."""
     model = params.model
     rng = np.random.default_rng(30)
-    r = np.sqrt(rng.uniform(0.05 ** 2, 0.17 ** 2, 30))
-    a = rng.uniform(0.0, 2.0 * np.pi, 30)
+    r = np.sqrt(rng.uniform(0.05 ** 2, 0.17 ** 2, pieces))
+    a = rng.uniform(0.0, 2.0 * np.pi, pieces)
     q = np.array([[x, y, resting_height(model, model.product, x, y)]
                   for x, y in zip(r * np.cos(a), r * np.sin(a))])
     return add_particles(SimState(), params, q)[0], rng

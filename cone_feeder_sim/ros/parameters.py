@@ -468,12 +468,19 @@ def model_from_values(values: dict[str, Any], base: ModelParams) -> ModelParams:
     return model_params_from_mapping(mapping, base)
 
 
-def engine_config_from_values(values: dict[str, Any], base: ModelParams) -> EngineConfig:
-    """Build and validate the whole engine configuration from parameter values."""
+def model_and_solver_from_values(values: dict[str, Any],
+                                 base: ModelParams) -> tuple[ModelParams, SolverParams]:
+    """Build the model (``model.*`` over base, ``interactions.*``) and ``solver.*``."""
     model = replace(model_from_values(values, base), interactions=InteractionParams(
         **{key: values[f'interactions.{key}'] for key in INTERACTION_KEYS}))
     solver = SolverParams(**{name[len('solver.'):]: value for name, value in values.items()
                              if name.startswith('solver.')})
+    return model, solver
+
+
+def engine_config_from_values(values: dict[str, Any], base: ModelParams) -> EngineConfig:
+    """Build and validate the whole engine configuration from parameter values."""
+    model, solver = model_and_solver_from_values(values, base)
     flat = _array(values['initial_pieces.positions'])
     if len(flat) % 3:
         raise ParameterError(f'initial_pieces.positions must be triples [x, y, z, ...]; got '

@@ -54,7 +54,7 @@ import numpy as np
 from .diagnostics import diagnostic_status
 from .guarded_node import GuardedNode, run_node
 from .outputs import Outputs
-from .parameters import declare, model_from_values, parameter_specs, ParamSpec, \
+from .parameters import declare, model_and_solver_from_values, parameter_specs, ParamSpec, \
     warn_unknown_parameters
 from .recording import NodeRecording
 from ..errors import ConeFeederError, Stopped, TwinError
@@ -64,7 +64,7 @@ from ..formats.parameter_file import load_model_params
 from ..formats.pointcloud import cloud_points
 from ..formats.runlog import run_metadata
 from ..formats.topics import TWIN_TOPICS
-from ..physics.params import INTERACTION_KEYS, InteractionParams, Limit, SolverParams
+from ..physics.params import Limit
 from ..physics.simulation import SimParams
 from ..twin.estimator import parameter_note, TUNING, TwinSettings
 from ..twin.frames import cone_speed, detection_frame, MAX_FUTURE, measured_exits
@@ -163,10 +163,7 @@ class TwinNode(GuardedNode):
         horizons = tuple(float(h) for h in values['horizons'])
         if not horizons or not all(0.0 < h <= 60.0 for h in horizons):
             raise TwinError(f'horizons must be numbers in (0, 60] s, got {list(horizons)}')
-        model = replace(model_from_values(values, base), interactions=InteractionParams(
-            **{key: values[f'interactions.{key}'] for key in INTERACTION_KEYS}))
-        solver = SolverParams(**{name[len('solver.'):]: value for name, value in values.items()
-                                 if name.startswith('solver.')})
+        model, solver = model_and_solver_from_values(values, base)
         settings = TwinSettings(
             members=int(values['members']), sigma=float(values['sigma']), d=model.product.d,
             mu_C=model.product.mu_C, seed=int(values['seed']),

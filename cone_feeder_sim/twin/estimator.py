@@ -44,6 +44,7 @@ members share, so a detection is turned into cone axes before the analysis (the 
 isotropic in x, y, so its covariance does not change).
 """
 
+import bisect
 import copy
 from dataclasses import dataclass, replace
 import math
@@ -452,12 +453,10 @@ class Twin:
             if i not in seen:
                 continue
             times, channels = zip(*seen[i])
-            self._recent_exits.append((float(np.mean(times)),
-                                       int(np.bincount(channels).argmax())))
+            when, channel = float(np.mean(times)), int(np.bincount(channels).argmax())
+            self._recent_exits.append((when, channel))
             if self.hits.get(i, 0) >= self.settings.confirm:
-                self._left.append(Exit(piece=i, t=float(np.mean(times)),
-                                       channel=int(np.bincount(channels).argmax()),
-                                       mass=self.masses[i]))
+                self._left.append(Exit(piece=i, t=when, channel=channel, mass=self.masses[i]))
         self._drop(dropped)
 
     def pieces(self, tentative: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -498,8 +497,11 @@ class Twin:
         if not math.isfinite(t) or t <= self.t - EXIT_LAG:
             raise ValueError(f'measured exit at t = {t} s: not finite, or older than the '
                              f'frames the twin took ({self.t} s, less {EXIT_LAG} s)')
-        self.pending_exits.append((float(t), channel))
-        self.pending_exits.sort()
+        self.pend_exit(t, channel)
+
+    def pend_exit(self, t: float, channel: int) -> None:
+        """Add a checked exit to those waiting, in time order (at any time: see Follower)."""
+        bisect.insort(self.pending_exits, (float(t), int(channel)))
 
     def exit_channel(self, channel: Any) -> int:
         """Return channel as an int; raise ValueError if it is not one of the layout's."""
@@ -589,7 +591,10 @@ class Twin:
         As :meth:`update` does, but any piece may be the one that left (no detection says
         which are still there). Returns the exits the twin saw among the pieces taken off.
         """
-        ids, mean, _ = self.pieces(tentative=True)
+        if self.pending_exits and self.pending_exits[0][0] <= self.t - EXIT_LAG:
+            ids, mean, _ = self.pieces(tentative=True)
+        else:  # nothing due: no piece to look at
+            ids, mean = np.zeros(0, dtype=np.int64), np.zeros((0, 2))
         _, _, left, _ = self._measured_exits(self.t, ids, mean)
         return tuple(left)
 
@@ -606,14 +611,14 @@ class Twin:
         """
         due = [e for e in self.pending_exits if e[0] <= t - EXIT_LAG]
         self.pending_exits = self.pending_exits[len(due):]
-        measured = np.array(due, dtype=float).reshape(-1, 2)
         explained = 0
         layout, radius = self.params.model.channels, self.params.model.r
         taken: list[int] = []
         left: list[Exit] = []
         free = np.ones(len(ids), dtype=bool)
-        for when, channel in measured.tolist():
-            channel = int(channel)
+        angle = np.arctan2(xy[:, 1], xy[:, 0])
+        width = math.radians(layout.width)
+        for when, channel in due:
             near = [k for k, (te, c) in enumerate(self._recent_exits)
                     if abs(te - when) <= EXIT_MATCH
                     and min((c - channel) % layout.count, (channel - c) % layout.count) <= 1]
@@ -625,9 +630,7 @@ class Twin:
             if not free.any():
                 continue
             start, end = np.radians(layout.sector_edges(channel))
-            angle = np.arctan2(xy[:, 1], xy[:, 0])
             offset = np.mod(angle - start, 2.0 * np.pi)  # from the sector's start, ccw
-            width = math.radians(layout.width)
             # the nearest point of the channel's stretch of rim: inside it, at the piece's
             # angle, else at the nearer edge
             nearest = np.where(offset <= width, angle,

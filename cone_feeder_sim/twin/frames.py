@@ -28,7 +28,7 @@ from ..errors import TwinError
 from ..formats.pointcloud import NO_TRACK
 
 __all__ = ['cone_speed', 'DetectionFrame', 'detection_frame', 'MAX_DETECTIONS',
-           'MAX_FUTURE', 'measured_exits']
+           'exit_columns', 'MAX_FUTURE', 'measured_exits']
 
 #: The most detections a frame may hold; a larger frame is refused.
 MAX_DETECTIONS = 10_000
@@ -130,14 +130,27 @@ def measured_exits(t: float, points: np.ndarray, channels: int) -> list[tuple[fl
     if len(points) > MAX_DETECTIONS:
         raise TwinError(f'exits at t = {t:.4f} s refused: {len(points)} exits, more than '
                         f'{MAX_DETECTIONS}')
-    times = (np.asarray(points['exit_time'], dtype=float) if 'exit_time' in names
-             else np.full(len(points), float(t)))
-    channel = np.asarray(points['channel'], dtype=float)
+    times, channel = exit_columns(t, points)
     if not (np.isfinite(times).all() and np.isfinite(t)):
         raise TwinError(f'exits at t = {t:.4f} s refused: a time that is not finite')
     if not np.all((channel == np.floor(channel)) & (channel >= 1) & (channel <= channels)):
         raise TwinError(f'exits at t = {t:.4f} s refused: a channel not in 1..{channels}')
     return sorted(zip(times.tolist(), channel.astype(int).tolist()))
+
+
+def exit_columns(t: float, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return an exits message's times (e,) (s: exit_time, else the stamp t) and channels.
+
+    channels (e,) float: the channel field, NaN where there is none (unchecked: see
+    :func:`measured_exits`).
+    """
+    names = points.dtype.names or ()
+    times = (np.asarray(points['exit_time'], dtype=float) if 'exit_time' in names
+             else np.full(len(points), float(t)))
+    channels = (np.asarray(points['channel'], dtype=float) if 'channel' in names
+                else np.full(len(points), np.nan))
+    return times, channels
 
 
 def cone_speed(t: float, names: list[str], velocities: list[float],

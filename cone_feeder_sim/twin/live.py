@@ -38,7 +38,6 @@ default) the forecast is made in the call that finds it due: deterministic, for 
 the headless run.
 """
 
-import bisect
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -187,9 +186,9 @@ class Follower:
         twin = self._start(t)
         if t > twin.t - EXIT_LAG:
             twin.measured_exit(t, channel)
-            self._measured.append((t, channel))
+            self._measured.append((t, int(channel)))
             if self._ahead is not None:  # in the dark, the copy takes it too, now if due
-                bisect.insort(self._ahead.pending_exits, (t, int(channel)))
+                self._ahead.pend_exit(t, channel)
                 self._ahead.open_loop_exits()
             return []
         later = [k for k, (stamp, _, _) in enumerate(self._history) if stamp - EXIT_LAG >= t]

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .frames import exit_columns
 from ..errors import ConeFeederError, TwinError
 from ..formats.cdr import decode
 from ..formats.mcap_reader import open_recording
@@ -36,6 +37,11 @@ __all__ = ['mcap_cone', 'mcap_detections', 'mcap_exits']
 
 #: The detections topics tried in turn when none is named.
 DETECTION_TOPICS = ('/detections', '/particle_states')
+
+
+def _seconds(stamp: dict) -> float:
+    """Return a header stamp (sec, nanosec) in seconds."""
+    return stamp['sec'] + stamp['nanosec'] * 1e-9
 
 
 def _recording(path: Path, topic: str | None, defaults: tuple[str, ...], type_name: str) -> tuple:
@@ -58,8 +64,7 @@ def mcap_detections(path: Path, topic: str | None = None) -> np.ndarray:
     rows = []
     for message in recording.messages({chosen}):
         cloud = decode(message.type_name, message.data)
-        stamp = cloud['header']['stamp']
-        t = stamp['sec'] + stamp['nanosec'] * 1e-9
+        t = _seconds(cloud['header']['stamp'])
         points = cloud_points(cloud)
         names = points.dtype.names or ()
         if 'x' not in names or 'y' not in names:
@@ -79,8 +84,7 @@ def mcap_cone(path: Path, topic: str | None = None, joint: str = 'cone') -> np.n
     for message in recording.messages({chosen}):
         state = decode(message.type_name, message.data)
         if joint in state['name'] and len(state['velocity']) > state['name'].index(joint):
-            stamp = state['header']['stamp']
-            rows.append([stamp['sec'] + stamp['nanosec'] * 1e-9,
+            rows.append([_seconds(state['header']['stamp']),
                          float(state['velocity'][state['name'].index(joint)])])
     table = np.array(rows, dtype=float).reshape(-1, 2)
     return table[np.argsort(table[:, 0], kind='stable')]
@@ -92,13 +96,7 @@ def mcap_exits(path: Path, topic: str | None = None) -> np.ndarray:
     rows = []
     for message in recording.messages({chosen}):
         cloud = decode(message.type_name, message.data)
-        stamp = cloud['header']['stamp']
-        points = cloud_points(cloud)
-        names = points.dtype.names or ()
-        times = (np.asarray(points['exit_time'], dtype=float) if 'exit_time' in names
-                 else np.full(len(points), stamp['sec'] + stamp['nanosec'] * 1e-9))
-        channels = (np.asarray(points['channel'], dtype=float) if 'channel' in names
-                    else np.full(len(points), np.nan))
-        rows.append(np.column_stack([times, channels]))
+        rows.append(np.column_stack(exit_columns(_seconds(cloud['header']['stamp']),
+                                                 cloud_points(cloud))))
     table = np.concatenate(rows) if rows else np.zeros((0, 2))
     return table[np.argsort(table[:, 0], kind='stable')]
