@@ -38,6 +38,13 @@ def pytest_configure(config: pytest.Config) -> None:
         # (--no-loadscope-reorder): keep the collection's order, the slow tests' files first
         config.option.loadscopereorder = False
     os.environ['ROS_DOMAIN_ID'] = str(worker_domains()[0])
+    # Fast DDS over UDP only, here and in every node a test starts. Its default adds a
+    # shared-memory transport whose segments in /dev/shm all processes on the machine share,
+    # so a process that dies holding one can take the others down (eProsima/Fast-DDS#6501;
+    # launch_ros and system_tests turn it off in their tests). Seen here: one xdist worker
+    # segfaulted in rclpy's destroy_node, then both idle workers aborted in native threads
+    # and the run hung. Without SHM the workers share nothing but the network.
+    os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
     # Idle OpenMP threads (numba's threading layer here) sleep instead of spinning, which
     # would take the cores the other workers need: set before numba starts its threads, for
     # this process and the nodes, clusters and commands it starts.
