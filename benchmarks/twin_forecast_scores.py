@@ -33,11 +33,13 @@ Scores:
 
 With --exits the twin also takes the plant's exits as a channel's sensors would report them
 (each at the end of the frame's step in which it happened), and the count of them it
-explained is printed::
+explained is printed; with --weighed too each comes with the piece's mass (a load cell's
+step: the twin's mean piece mass, which its newborn pieces get, is printed). --plant-mass
+gives the plant's pieces another mass than the prior's (0.125 kg)::
 
     .venv/bin/python benchmarks/twin_forecast_scores.py [--seconds 12] [--members 16] [--seed 1]
-        [--truth 315 0.78] [--particles 32] [--smoother-pieces 6] [--exits]
-        [--loosen 10]
+        [--truth 315 0.78] [--particles 32] [--smoother-pieces 6] [--exits [--weighed]]
+        [--plant-mass 0.2] [--loosen 10]
 """
 
 import argparse
@@ -146,15 +148,22 @@ def main() -> None:
                              'exits), and the scores are also given over these forecasts')
     parser.add_argument('--truth', type=float, nargs=2, metavar=('D', 'MU_C'),
                         help="the plant's d and mu_C (default: the prior's)")
+    parser.add_argument('--plant-mass', type=float, metavar='KG',
+                        help="the plant's pieces' mass (default: the prior's, 0.125 kg)")
+    parser.add_argument('--weighed', action='store_true',
+                        help="with --exits: each exit comes with the piece's mass, as a "
+                             "load cell's step would")
     args = parser.parse_args()
     print(calibration_line(), flush=True)
     warm_up()
     model = ModelParams()
     params = SimParams(model=model)  # the prior: the twin's and the open loop's
-    truth = params if args.truth is None else SimParams(model=replace(model, product=replace(
-        model.product, d=args.truth[0], mu_C=args.truth[1])))
-    print(f'plant d = {truth.model.product.d:g}, mu_C = {truth.model.product.mu_C:g}; '
-          f'prior d = {model.product.d:g}, mu_C = {model.product.mu_C:g}', flush=True)
+    d, mu_c = (model.product.d, model.product.mu_C) if args.truth is None else args.truth
+    truth = SimParams(model=replace(model, product=replace(
+        model.product, d=d, mu_C=mu_c, m=args.plant_mass or model.product.m)))
+    print(f'plant d = {d:g}, mu_C = {mu_c:g}, m = {truth.model.product.m:g} kg; '
+          f'prior d = {model.product.d:g}, mu_C = {model.product.mu_C:g}, '
+          f'm = {model.product.m:g} kg', flush=True)
     profile = reversing(args.seconds + 3.0)
     start = time.perf_counter()
     plant = simulate_plant(truth, profile, args.seconds)
@@ -175,10 +184,10 @@ def main() -> None:
     for t, ids, truth, seen_ids, xy in plant['frames']:
         twin.cone_speed(t, profile.omega(t))
         if args.exits:  # those measured up to the frame (an exit of the frame's step: its end)
-            new = [(te, c) for _, te, c, _ in exits[fed:] if te <= t]
+            new = [(te, c, m) for _, te, c, m in exits[fed:] if te <= t]
             fed += len(new)
-            for te, c in new:
-                twin.measured_exit(te, c)
+            for te, c, m in new:
+                twin.measured_exit(te, c, m if args.weighed else math.nan)
         if args.dark and args.dark[0] < t <= args.dark[1]:
             twin.predict(t)
             if args.exits:
@@ -215,7 +224,8 @@ def main() -> None:
     wall = time.perf_counter() - start
     print(f'{len(exits)} exits, {len(picks)} forecasts, {wall:.1f} s wall', flush=True)
     if args.exits:
-        print(f'measured exits: {fed} given, {explained} explained in frames, '
+        print(f'measured exits: {fed} given, {explained} explained in frames, twin piece '
+              f'mass {twin.piece_mass:.4f} kg, '
               f'{taken_dark} took a piece in the dark', flush=True)
     for lead in LEADS:
         cases, right = 0, {'twin': 0, 'open loop': 0, 'constant velocity': 0}

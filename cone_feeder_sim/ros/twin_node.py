@@ -22,7 +22,8 @@ It subscribes ``detections`` (sensor_msgs/PointCloud2 in the feeder frame: field
 optionally track_id and mass; ``sim_node``'s ``particle_states`` has this layout) and
 ``cone_state`` (sensor_msgs/JointState, joint ``cone``: the measured speed), and takes the
 exits a channel's sensors measure where they are published: ``exit_events``
-(sensor_msgs/PointCloud2: a field channel, optionally exit_time; ``sim_node``'s has both).
+(sensor_msgs/PointCloud2: a field channel, optionally exit_time and mass, a load cell's
+step; ``sim_node``'s has all three).
 It publishes
 
 - ``twin/pieces`` (PointCloud2: each piece's position, spread, most likely channel, its
@@ -32,7 +33,8 @@ It publishes
 - ``twin/parameters`` (Float64MultiArray: d, its spread, mu_C, its spread),
 - ``/diagnostics`` (the NIS against its degrees of freedom, the association rate, the
   ensemble's spread, the real-time factor, the latency from a frame's arrival to its
-  publication, the share of the measured exits the twin explained, and the state:
+  publication, the share of the measured exits the twin explained, the mean piece mass
+  the weighed exits give (:attr:`~..twin.estimator.Twin.piece_mass`), and the state:
   following, open loop or lost),
 
 and records them with its inputs to MCAP (``record_path``). The model is sim_node's
@@ -298,9 +300,9 @@ class TwinNode(GuardedNode):
             return
         taken: list[float] = []
         try:
-            for when, channel in exits:  # one older than the history is refused alone
+            for when, channel, mass in exits:  # one older than the history is refused alone
                 try:
-                    taken += self._follower.measured_exit(when, channel)
+                    taken += self._follower.measured_exit(when, channel, mass)
                 except ValueError as exc:
                     self._refuse(str(exc))
         except Stopped:
@@ -360,6 +362,7 @@ class TwinNode(GuardedNode):
             values['ensemble spread median (mm)'] = f'{1e3 * float(np.median(spread)):.3g}'
             for key, (estimate, sd) in self._follower.current.parameters().items():
                 values[key] = f'{estimate:.5g} +- {sd:.2g}'
+            values['piece mass (kg)'] = f'{self._follower.current.piece_mass:.5g}'
         level = 0 if state == 'following' else 1
         status = diagnostic_status(level, f'{self.get_fully_qualified_name()}: twin', state,
                                    values)

@@ -64,9 +64,9 @@ from ..physics.simulation import (
     StepResult, world_from_cone)
 from ..physics.stop import StopFlag
 
-__all__ = ['CALIBRATED_PARTICLES', 'Exit', 'EXIT_LAG', 'EXIT_MATCH', 'Frame', 'MISSED_FRAME',
-           'parameter_note', 'RIM_GATE', 'STILL', 'TUNING', 'Twin', 'TwinSettings',
-           'weighed_values', 'window_log_likelihood']
+__all__ = ['CALIBRATED_PARTICLES', 'Exit', 'EXIT_LAG', 'EXIT_MATCH', 'Frame', 'MASS_PRIOR',
+           'MISSED_FRAME', 'parameter_note', 'RIM_GATE', 'STILL', 'TUNING', 'Twin',
+           'TwinSettings', 'weighed_values', 'window_log_likelihood']
 
 #: The ranges the members' parameters are held in: log d (d in N*s/m) and mu_C.
 LOG_D_RANGE = (math.log(1.0), math.log(1.0e4))
@@ -99,6 +99,10 @@ EXIT_MATCH = 0.2
 #: ... else the piece the camera did not see in the frame, nearest the channel's stretch of
 #: rim and within this distance of it (m), leaves the twin at once.
 RIM_GATE = 0.05
+#: The product's mean piece mass, which a piece born without a camera's mass gets, starts
+#: at the scenario's product mass, worth this many weighed pieces; each measured exit with a
+#: mass (a load cell's step) adds its own (:attr:`Twin.piece_mass`).
+MASS_PRIOR = 5.0
 
 
 @dataclass(frozen=True)
@@ -318,9 +322,12 @@ class Twin:
         self._exits: list[int] = []
         self._left: list[Exit] = []
         #: the exits the members let happen in the last second, not yet matched with a
-        #: measured one, and the measured exits no frame took yet: (t (s), channel) each
+        #: measured one: (t (s), channel) each; the measured exits no frame took yet: (t
+        #: (s), channel, mass (kg; NaN: not weighed)) each
         self._recent_exits: list[tuple[float, int]] = []
-        self.pending_exits: list[tuple[float, int]] = []
+        self.pending_exits: list[tuple[float, int, float]] = []
+        #: the measured exits' masses taken so far: how many, their sum (kg)
+        self._weighed = (0, 0.0)
         self._drifted = t0
         #: the window: its start (s); the smoother's members (None: nothing to weigh), run
         #: alongside the twin's: one state holding Q = P + M copies of each piece (id * Q +
@@ -484,24 +491,46 @@ class Twin:
         return {'d': (float(d.mean()), float(d.std(ddof=1))),
                 'mu_C': (float(self.mu_c.mean()), float(self.mu_c.std(ddof=1)))}
 
-    def measured_exit(self, t: float, channel: int) -> None:
+    @property
+    def piece_mass(self) -> float:
         """
-        Take an exit a channel's sensor measured: t (s), channel (1-based).
+        Return the product's mean piece mass (kg) a piece born without a camera's mass gets.
+
+        The scenario's product mass, worth :data:`MASS_PRIOR` pieces, and the masses of the
+        measured exits taken so far (load cells), averaged.
+        """
+        count, total = self._weighed
+        return (MASS_PRIOR * self.params.model.product.m + total) / (MASS_PRIOR + count)
+
+    def measured_exit(self, t: float, channel: int, mass: float = math.nan) -> None:
+        """
+        Take an exit a channel's sensor measured: t (s), channel (1-based), mass (kg; NaN:
+        not weighed; a load cell's step).
 
         The first frame stamped at least :data:`EXIT_LAG` s after it takes it (see
         :meth:`update`). Raises ValueError for a time that is not finite or that a frame
-        already passed (:class:`.live.Follower` goes back for it), or a channel not in the
-        layout.
+        already passed (:class:`.live.Follower` goes back for it), a channel not in the
+        layout, or a mass that is neither NaN nor a positive number.
         """
-        channel = self.exit_channel(channel)
+        channel, mass = self.exit_channel(channel), self.exit_mass(mass)
         if not math.isfinite(t) or t <= self.t - EXIT_LAG:
             raise ValueError(f'measured exit at t = {t} s: not finite, or older than the '
                              f'frames the twin took ({self.t} s, less {EXIT_LAG} s)')
-        self.pend_exit(t, channel)
+        self.pend_exit(t, channel, mass)
 
-    def pend_exit(self, t: float, channel: int) -> None:
+    def pend_exit(self, t: float, channel: int, mass: float = math.nan) -> None:
         """Add a checked exit to those waiting, in time order (at any time: see Follower)."""
-        bisect.insort(self.pending_exits, (float(t), int(channel)))
+        bisect.insort(self.pending_exits, (float(t), int(channel), float(mass)))
+
+    @staticmethod
+    def exit_mass(mass: Any) -> float:
+        """Return mass (kg) as a float; raise ValueError unless it is NaN or positive."""
+        if isinstance(mass, bool) or not isinstance(mass, (int, float, np.integer,
+                                                           np.floating)) or not (
+                math.isnan(mass) or (math.isfinite(mass) and mass > 0.0)):
+            raise ValueError(f'measured exit: mass {mass!r} is not a positive number (kg) '
+                             f'or NaN (not weighed)')
+        return float(mass)
 
     def exit_channel(self, channel: Any) -> int:
         """Return channel as an int; raise ValueError if it is not one of the layout's."""
@@ -528,7 +557,8 @@ class Twin:
         no detection of the frame was associated with and that is nearest the channel's
         stretch of rim, within :data:`RIM_GATE`, leaves the twin at the measured time
         (:attr:`Frame.left`), instead of dying ``death_after`` s later while the forecasts
-        still count it.
+        still count it. Each weighed exit's mass joins the mean piece mass that pieces born
+        without a camera's mass get (:attr:`piece_mass`), whichever piece it was.
         """
         detections = np.asarray(detections, dtype=float).reshape(-1, detections.shape[-1])
         if not np.isfinite(detections).all():
@@ -611,6 +641,10 @@ class Twin:
         """
         due = [e for e in self.pending_exits if e[0] <= t - EXIT_LAG]
         self.pending_exits = self.pending_exits[len(due):]
+        weighed = [mass for _, _, mass in due if not math.isnan(mass)]
+        if weighed:
+            count, total = self._weighed
+            self._weighed = (count + len(weighed), total + math.fsum(weighed))
         explained = 0
         layout, radius = self.params.model.channels, self.params.model.r
         taken: list[int] = []
@@ -618,7 +652,7 @@ class Twin:
         free = np.ones(len(ids), dtype=bool)
         angle = np.arctan2(xy[:, 1], xy[:, 0])
         width = math.radians(layout.width)
-        for when, channel in due:
+        for when, channel, mass in due:
             near = [k for k, (te, c) in enumerate(self._recent_exits)
                     if abs(te - when) <= EXIT_MATCH
                     and min((c - channel) % layout.count, (channel - c) % layout.count) <= 1]
@@ -645,7 +679,8 @@ class Twin:
             i = int(ids[k])
             taken.append(i)
             if self.hits.get(i, 0) >= self.settings.confirm:
-                left.append(Exit(piece=i, t=float(when), channel=channel, mass=self.masses[i]))
+                left.append(Exit(piece=i, t=float(when), channel=channel,
+                                 mass=self.masses[i] if math.isnan(mass) else mass))
             explained += 1
         self._drop(taken)
         # the exits still to come are after t - EXIT_LAG: none can match an older one of
@@ -944,7 +979,7 @@ class Twin:
     def _birth(self, xy: np.ndarray, masses: np.ndarray | None, t: float) -> None:
         model = self.params.model
         first = self.states[0].next_id
-        weights = [model.product.m if masses is None or not math.isfinite(masses[k])
+        weights = [self.piece_mass if masses is None or not math.isfinite(masses[k])
                    else float(masses[k]) for k in range(len(xy))]
         omega = self._profile.omega(self.t)
         grown = []

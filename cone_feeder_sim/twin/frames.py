@@ -114,14 +114,16 @@ def _track_ids(values: np.ndarray) -> np.ndarray | None:
     return ids
 
 
-def measured_exits(t: float, points: np.ndarray, channels: int) -> list[tuple[float, int]]:
+def measured_exits(t: float, points: np.ndarray,
+                   channels: int) -> list[tuple[float, int, float]]:
     """
-    Check a message of measured exits and return them: (t (s), channel) each.
+    Check a message of measured exits and return them: (t (s), channel, mass (kg)) each.
 
-    points: a structured array with a field channel (1-based) and optionally exit_time (s;
-    else each exit is at the stamp t), as sim_node's ``exit_events`` (a channel's sensors
-    may send fewer fields); channels: the layout's count. Raises TwinError naming what is
-    wrong; the message is then taken whole or not at all.
+    points: a structured array with a field channel (1-based), optionally exit_time (s;
+    else each exit is at the stamp t) and mass (kg, a load cell's step; NaN or no field:
+    not weighed), as sim_node's ``exit_events`` (a channel's sensors may send fewer
+    fields); channels: the layout's count. Raises TwinError naming what is wrong; the
+    message is then taken whole or not at all.
     """
     names = points.dtype.names or ()
     if 'channel' not in names:
@@ -130,27 +132,31 @@ def measured_exits(t: float, points: np.ndarray, channels: int) -> list[tuple[fl
     if len(points) > MAX_DETECTIONS:
         raise TwinError(f'exits at t = {t:.4f} s refused: {len(points)} exits, more than '
                         f'{MAX_DETECTIONS}')
-    times, channel = exit_columns(t, points)
+    times, channel, mass = exit_columns(t, points)
     if not (np.isfinite(times).all() and np.isfinite(t)):
         raise TwinError(f'exits at t = {t:.4f} s refused: a time that is not finite')
     if not np.all((channel == np.floor(channel)) & (channel >= 1) & (channel <= channels)):
         raise TwinError(f'exits at t = {t:.4f} s refused: a channel not in 1..{channels}')
-    return sorted(zip(times.tolist(), channel.astype(int).tolist()))
+    weighed = ~np.isnan(mass)
+    if not (np.isfinite(mass[weighed]).all() and (mass[weighed] > 0.0).all()):
+        raise TwinError(f'exits at t = {t:.4f} s refused: a mass that is not a positive '
+                        f'number (kg; NaN: not weighed)')
+    return sorted(zip(times.tolist(), channel.astype(int).tolist(), mass.tolist()))
 
 
-def exit_columns(t: float, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def exit_columns(t: float, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
-    Return an exits message's times (e,) (s: exit_time, else the stamp t) and channels.
+    Return an exits message's times (e,) (s: exit_time, else the stamp t), channels, masses.
 
-    channels (e,) float: the channel field, NaN where there is none (unchecked: see
-    :func:`measured_exits`).
+    channels (e,) float: the channel field, NaN where there is none; masses (e,) kg: the
+    mass field, NaN where there is none (unchecked: see :func:`measured_exits`).
     """
     names = points.dtype.names or ()
     times = (np.asarray(points['exit_time'], dtype=float) if 'exit_time' in names
              else np.full(len(points), float(t)))
-    channels = (np.asarray(points['channel'], dtype=float) if 'channel' in names
-                else np.full(len(points), np.nan))
-    return times, channels
+    channels, masses = (np.asarray(points[name], dtype=float) if name in names
+                        else np.full(len(points), np.nan) for name in ('channel', 'mass'))
+    return times, channels, masses
 
 
 def cone_speed(t: float, names: list[str], velocities: list[float],

@@ -95,9 +95,9 @@ class Follower:
         #: (t, the twin before it moved to t, the frame analysed at t); the last max_delay s
         self._history: deque[tuple[float, Twin, DetectionFrame]] = deque()
         #: the cone speeds measured over the history: (t, omega); the measured exits: (t,
-        #: channel)
+        #: channel, mass (kg; NaN: not weighed))
         self._speeds: deque[tuple[float, float]] = deque()
-        self._measured: list[tuple[float, int]] = []
+        self._measured: list[tuple[float, int, float]] = []
         self._cone_t = -math.inf
         self._due = 0.0
         #: per frame of the last second: (t, detections, associated or born)
@@ -172,30 +172,32 @@ class Follower:
         self._waiting.append(found)
         return taken + self._take(lambda waiting: waiting.t <= self._cone_t)
 
-    def measured_exit(self, t: float, channel: int) -> list[float]:
+    def measured_exit(self, t: float, channel: int, mass: float = math.nan) -> list[float]:
         """
-        Take an exit a channel's sensor measured at t (s); return the stamps analysed again.
+        Take an exit a channel's sensor measured at t (s), with its mass (kg; NaN: not
+        weighed); return the stamps analysed again.
 
         The frame stamped :data:`~.estimator.EXIT_LAG` s after it takes it
         (:meth:`.estimator.Twin.update`); one that comes after that frame was analysed goes
         back to the twin before it, as a late frame does. Raises ValueError for a channel not
-        in the layout, or an exit older than the history.
+        in the layout, a mass neither NaN nor positive, or an exit older than the history.
         """
         if not math.isfinite(t):
             raise ValueError(f'measured exit at t = {t} s: not finite')
+        mass = Twin.exit_mass(mass)
         twin = self._start(t)
         if t > twin.t - EXIT_LAG:
-            twin.measured_exit(t, channel)
-            self._measured.append((t, int(channel)))
+            twin.measured_exit(t, channel, mass)
+            self._measured.append((t, int(channel), mass))
             if self._ahead is not None:  # in the dark, the copy takes it too, now if due
-                self._ahead.pend_exit(t, channel)
+                self._ahead.pend_exit(t, channel, mass)
                 self._ahead.open_loop_exits()
             return []
         later = [k for k, (stamp, _, _) in enumerate(self._history) if stamp - EXIT_LAG >= t]
         if not later or self._history[later[0]][1].t - EXIT_LAG >= t:
             raise ValueError(f'measured exit at t = {t} s is older than the twin can go back '
                              f'to (max_delay {self.settings.max_delay} s)')
-        self._measured.append((t, twin.exit_channel(channel)))
+        self._measured.append((t, twin.exit_channel(channel), mass))
         frames = self._back_to(later[0])
         for found in frames:
             self._analyse(found)

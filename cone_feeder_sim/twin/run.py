@@ -114,9 +114,9 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
                 pending = next(cone, None)
             while measured is not None and measured[0] <= t:
                 try:
-                    channel = measured[1]
-                    twin.measured_exit(measured[0], int(channel) if channel == channel // 1
-                                       else channel)
+                    when, channel, mass = measured
+                    twin.measured_exit(when, int(channel) if channel == channel // 1
+                                       else channel, mass)
                 except ValueError as exc:
                     log(f'exit refused: {exc}')
                 measured = next(exits, None)

@@ -23,9 +23,10 @@ A twin file is a YAML mapping::
                                # default /detections, else /particle_states)
     cone: cone.csv             # columns t, omega (s, rad/s), or an MCAP file (a JointState
                                # topic: cone_topic, default /cone_state; joint cone)
-    exits: exits.csv           # optional, measured exits: columns t, channel (s, 1-based),
-                               # or an MCAP file (a PointCloud2 topic: exits_topic, default
-                               # /exit_events; fields channel, optionally exit_time)
+    exits: exits.csv           # optional, measured exits: columns t, channel[, mass] (s,
+                               # 1-based, kg: a load cell's step; empty: not weighed), or
+                               # an MCAP file (a PointCloud2 topic: exits_topic, default
+                               # /exit_events; fields channel, optionally exit_time, mass)
     # defaults:
     members: 8                 # the ensemble's size
     sigma: 0.002               # the detections' noise (m)
@@ -74,9 +75,9 @@ class TwinSpec:
     scenario: the machine and the product prior; detections: (k, 5) rows t (s), x, y (m),
     mass (kg), track_id (NaN: not given), sorted by t (z is not read); cone: (j, 2) rows
     t (s), omega (rad/s), sorted; members, sigma (m), horizons (s), every (s), seed as in the file;
-    tuning: the other estimator settings the file sets (:data:`TUNING`); exits: (e, 2) rows
-    t (s), channel (NaN: not given; checked when the twin takes it), sorted, the measured
-    exits (none without the key).
+    tuning: the other estimator settings the file sets (:data:`TUNING`); exits: (e, 3) rows
+    t (s), channel, mass (kg) (NaN: not given; checked when the twin takes them), sorted,
+    the measured exits (none without the key).
     """
 
     scenario: Scenario
@@ -88,7 +89,7 @@ class TwinSpec:
     every: float = 0.1
     seed: int = 0
     tuning: dict[str, float] = field(default_factory=dict)
-    exits: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    exits: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def settings(self) -> TwinSettings:
         """Return the estimator's settings: the file's, the scenario's product as the prior."""
@@ -166,11 +167,11 @@ def load_twin(path: str | Path) -> TwinSpec:
                   else _rows(found, ('t', 'x', 'y'), ('mass', 'track_id')))
     cone = (mcap_cone(speeds, content.get('cone_topic')) if speeds.suffix == '.mcap'
             else _rows(speeds, ('t', 'omega'), ()))
-    exits = np.zeros((0, 2))
+    exits = np.zeros((0, 3))
     if 'exits' in content:
         measured = base / content['exits']
         exits = (mcap_exits(measured, content.get('exits_topic')) if measured.suffix == '.mcap'
-                 else _rows(measured, ('t', 'channel'), ()))
+                 else _rows(measured, ('t', 'channel'), ('mass',)))
     horizons = content.get('horizons', [0.5, 1.0, 2.0])
     if (not isinstance(horizons, list) or not horizons or any(
             isinstance(h, bool) or not isinstance(h, (int, float)) or not 0 < h <= 60

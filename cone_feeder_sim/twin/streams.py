@@ -91,12 +91,15 @@ def mcap_cone(path: Path, topic: str | None = None, joint: str = 'cone') -> np.n
 
 
 def mcap_exits(path: Path, topic: str | None = None) -> np.ndarray:
-    """Return the measured exits (e, 2): t (s), channel (1-based; NaN: none), sorted by t."""
+    """
+    Return the measured exits (e, 3), sorted by t: t (s), channel (1-based; NaN: none),
+    mass (kg; NaN: not weighed).
+    """
     recording, chosen = _recording(path, topic, ('/exit_events',), 'sensor_msgs/msg/PointCloud2')
     rows = []
     for message in recording.messages({chosen}):
         cloud = decode(message.type_name, message.data)
         rows.append(np.column_stack(exit_columns(_seconds(cloud['header']['stamp']),
                                                  cloud_points(cloud))))
-    table = np.concatenate(rows) if rows else np.zeros((0, 2))
+    table = np.concatenate(rows) if rows else np.zeros((0, 3))
     return table[np.argsort(table[:, 0], kind='stable')]

@@ -227,10 +227,11 @@ def test_bad_inputs_are_refused_and_the_twin_goes_on(context: Any, tmp_path: Pat
         # alone
         exits = np.zeros(3, dtype=EXIT_DTYPE)
         exits['exit_time'], exits['channel'] = [0.15, 0.16, -0.1], [3, 4, 5]
+        exits['mass'] = [0.05, 0.06, 0.07]
         plant.exits.publish(CODEC.encode('sensor_msgs/msg/PointCloud2',
                                          cloud_message(header(0.17, 'feeder'), exits)))
         assert plant.spin_until(lambda: len(twin._follower.twin.pending_exits) == 2)
-        assert twin._follower.twin.pending_exits == [(0.15, 3), (0.16, 4)]
+        assert twin._follower.twin.pending_exits == [(0.15, 3, 0.05), (0.16, 4, 0.06)]
         assert plant.spin_until(lambda: any('older than the twin can go back' in line
                                             for line in logged))
         assert any('not finite' in line for line in logged)

@@ -21,14 +21,14 @@ the detections and the cone speed only.
 
 from dataclasses import replace
 
-from cone_feeder_sim.physics.params import ModelParams, P_D
+from cone_feeder_sim.physics.params import ModelParams, P_D, P_M
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, remove_particles, resting_height, SimParams, SimState,
     world_from_cone)
 from cone_feeder_sim.twin.estimator import (
-    Exit, EXIT_LAG, Frame, MISSED_FRAME, parameter_note, STILL, Twin, TwinSettings,
-    weighed_values, window_log_likelihood)
+    Exit, EXIT_LAG, Frame, MASS_PRIOR, MISSED_FRAME, parameter_note, STILL, Twin,
+    TwinSettings, weighed_values, window_log_likelihood)
 from cone_feeder_sim.twin.particles import resample_parameters
 import numpy as np
 import pytest
@@ -209,11 +209,41 @@ def test_an_exit_the_twin_let_happen_explains_the_measured_one() -> None:
     assert np.array_equal(twin.pieces()[1], alone.pieces()[1])
 
 
+def test_weighed_exits_give_the_mass_of_the_pieces_born_after_them() -> None:
+    # load cells: each weighed exit's mass joins the product's, worth MASS_PRIOR pieces; a
+    # piece born without a camera's mass gets the mean, one with a camera's mass keeps it
+    channel = int(MODEL.channels.channel_of(0.0))
+    twin = rim_twin()
+    assert twin.piece_mass == MODEL.product.m
+    twin.measured_exit(0.1, channel, 0.2)  # the rim piece's
+    twin.measured_exit(0.11, int(MODEL.channels.channel_of(180.0)))  # not weighed
+    twin.measured_exit(0.12, int(MODEL.channels.channel_of(180.0)), 0.1)  # no piece there
+    inner = np.array([[0.05, 0.05]])
+    frame = twin.update(0.1 + EXIT_LAG, inner)
+    assert frame.measured == 1 and twin.pieces()[0].tolist() == [1]
+    assert frame.left == (Exit(piece=0, t=0.1, channel=channel, mass=0.2),)  # as weighed
+    mean = (MASS_PRIOR * MODEL.product.m + 0.2) / (MASS_PRIOR + 1)
+    assert twin.piece_mass == pytest.approx(mean, rel=1e-15)
+    assert twin.update(0.12 + EXIT_LAG, inner).measured == 2
+    mean = (MASS_PRIOR * MODEL.product.m + 0.3) / (MASS_PRIOR + 2)
+    assert twin.piece_mass == pytest.approx(mean, rel=1e-15)
+    born = np.array([[0.05, 0.05], [-0.05, -0.05], [0.0, -0.1]])
+    twin.update(0.25, born, np.array([np.nan, np.nan, 0.03]))
+    assert twin.pieces()[0].tolist() == [1, 2, 3]
+    assert twin.masses[1] == MODEL.product.m  # born before
+    assert twin.masses[2] == twin.piece_mass and twin.masses[3] == 0.03
+    # the members simulate the newborn with that mass
+    assert all(s.products[list(s.ids).index(2)][P_M] == twin.piece_mass for s in twin.states)
+
+
 def test_a_bad_measured_exit_is_refused_with_its_reason() -> None:
     twin = rim_twin()
     for channel in (0, MODEL.channels.count + 1, 2.0, True):
         with pytest.raises(ValueError, match=f'channel {channel!r} is not one of 1..14'):
             twin.measured_exit(0.05, channel)
+    for mass in (0.0, -0.05, float('inf'), True, '0.05'):
+        with pytest.raises(ValueError, match=f'mass {mass!r} is not a positive number'):
+            twin.measured_exit(0.05, 3, mass)
     twin.update(0.5, np.array([[0.05, 0.05]]))
     with pytest.raises(ValueError, match='older than the frames the twin took'):
         twin.measured_exit(0.5 - EXIT_LAG, 3)

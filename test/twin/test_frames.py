@@ -14,6 +14,8 @@
 
 """Tests of cone_feeder_sim.twin.frames: a frame's track ids, measured exits."""
 
+import math
+
 from cone_feeder_sim.errors import TwinError
 from cone_feeder_sim.formats.pointcloud import DETECTION_DTYPE, EXIT_DTYPE, NO_TRACK
 from cone_feeder_sim.twin.estimator import Twin, TwinSettings
@@ -56,10 +58,12 @@ def test_a_piece_keeps_its_last_track_id_and_none_is_not_one() -> None:
 def test_measured_exits_are_read_from_sim_node_s_layout_or_a_sensor_s() -> None:
     points = np.zeros(2, dtype=EXIT_DTYPE)  # sim_node's exit_events: the exit_time field
     points['exit_time'], points['channel'] = [0.42, 0.31], [3, 14]
-    assert measured_exits(0.5, points, 14) == [(0.31, 14), (0.42, 3)]
+    points['mass'] = [0.05, 0.07]  # and the mass field: weighed
+    assert measured_exits(0.5, points, 14) == [(0.31, 14, 0.07), (0.42, 3, 0.05)]
     sensor = np.zeros(1, dtype=[('channel', '<u1')])  # a sensor's: the stamp is the time
     sensor['channel'] = 7
-    assert measured_exits(0.5, sensor, 14) == [(0.5, 7)]
+    ((t, channel, mass),) = measured_exits(0.5, sensor, 14)
+    assert (t, channel) == (0.5, 7) and math.isnan(mass)  # no mass field: not weighed
 
 
 @pytest.mark.parametrize(('change', 'fragment'), [
@@ -67,10 +71,13 @@ def test_measured_exits_are_read_from_sim_node_s_layout_or_a_sensor_s() -> None:
     ({'channel': [0, 2]}, 'a channel not in 1..14'),
     ({'channel': [2.5, 2]}, 'a channel not in 1..14'),
     ({'exit_time': [0.1, np.nan]}, 'a time that is not finite'),
+    ({'mass': [0.05, 0.0]}, 'a mass that is not a positive number'),
+    ({'mass': [-0.05, np.nan]}, 'a mass that is not a positive number'),
+    ({'mass': [np.inf, 0.05]}, 'a mass that is not a positive number'),
 ])
 def test_a_bad_message_of_exits_is_refused_whole(change: dict, fragment: str) -> None:
-    points = np.zeros(2, dtype=[('exit_time', '<f8'), ('channel', '<f8')])
-    points['exit_time'], points['channel'] = [0.1, 0.2], [3, 4]
+    points = np.zeros(2, dtype=[('exit_time', '<f8'), ('channel', '<f8'), ('mass', '<f8')])
+    points['exit_time'], points['channel'], points['mass'] = [0.1, 0.2], [3, 4], [0.05, np.nan]
     for key, value in change.items():
         points[key] = value
     with pytest.raises(TwinError, match=fragment):

@@ -184,19 +184,24 @@ def test_measured_exits_are_read_from_a_recording_or_a_csv(tmp_path: Path) -> No
             'members': 4, 'sigma': 0.001, 'd_spread': 0.05, 'mu_C_spread': 0.01}
     (tmp_path / 'twin.yaml').write_text(yaml.safe_dump({**twin, 'exits': 'plant.mcap'}))
     spec = load_twin(tmp_path / 'twin.yaml')
+    # sim_node's exit_events carry the piece's mass: the exit is weighed
     assert spec.exits.tolist() == [[pytest.approx(float(event['t']), abs=1e-9),
-                                    int(event['channel'])]]
+                                    int(event['channel']), MODEL.product.m]]
     run_twin(spec, tmp_path / 'out')
     frames = read(tmp_path / 'out' / 'frames.csv')
     assert sum(int(f['measured']) for f in frames) == 1
     assert sum(int(f['explained']) for f in frames) == 1
-    # a CSV's: a channel that is not one is refused in one line, the rest taken
-    (tmp_path / 'exits.csv').write_text(f"t,channel\n{event['t']},{event['channel']}\n"
-                                        '0.9,15\n')
+    # a CSV's: a channel that is not one, or a mass that is not one, is refused in one
+    # line, the rest taken (an empty mass: not weighed)
+    (tmp_path / 'exits.csv').write_text(
+        f"t,channel,mass\n{event['t']},{event['channel']},{MODEL.product.m!r}\n"
+        '0.9,15,\n0.95,3,-0.1\n')
     (tmp_path / 'twin.yaml').write_text(yaml.safe_dump({**twin, 'exits': 'exits.csv'}))
     logged: list[str] = []
     run_twin(load_twin(tmp_path / 'twin.yaml'), tmp_path / 'csv', logged.append)
-    assert logged == ['exit refused: measured exit: channel 15 is not one of 1..14']
+    assert logged == ['exit refused: measured exit: channel 15 is not one of 1..14',
+                      'exit refused: measured exit: mass -0.1 is not a positive number (kg) '
+                      'or NaN (not weighed)']
     assert read(tmp_path / 'csv' / 'frames.csv') == frames
 
 

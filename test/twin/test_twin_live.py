@@ -22,7 +22,7 @@ from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
 from cone_feeder_sim.twin.camera import CameraSettings, observe
-from cone_feeder_sim.twin.estimator import TwinSettings
+from cone_feeder_sim.twin.estimator import MASS_PRIOR, TwinSettings
 from cone_feeder_sim.twin.frames import DetectionFrame
 from cone_feeder_sim.twin.live import Follower, LiveSettings
 import numpy as np
@@ -159,12 +159,14 @@ def test_a_late_measured_exit_gives_what_it_gives_in_order() -> None:
             follower.frame(found)
             follower.cone_speed(found.t, 0.0)
             if abs(found.t - (0.3 if not late else 0.5)) < 1e-9:
-                again = follower.measured_exit(0.3, channel)
+                again = follower.measured_exit(0.3, channel, 0.08)  # a load cell's step
         assert again == ([] if not late else [frames[k].t for k in (11, 12, 13, 14)])
         twins.append(follower.twin)
     ours, theirs = twins
     assert theirs.pieces()[0].tolist() == ours.pieces()[0].tolist() == [1]
     assert ours.t == theirs.t and ours.parameters() == theirs.parameters()
+    weighed = (MASS_PRIOR * MODEL.product.m + 0.08) / (MASS_PRIOR + 1)
+    assert ours.piece_mass == theirs.piece_mass == pytest.approx(weighed, rel=1e-15)
     assert np.array_equal(ours.states[3].y, theirs.states[3].y)
     with pytest.raises(ValueError, match='older than the twin can go back to'):
         follower.measured_exit(0.1, channel)
@@ -190,7 +192,8 @@ def test_in_open_loop_the_moving_copy_takes_the_measured_exits() -> None:
             assert follower.current.pieces()[0].tolist() == [0, 1]
     assert follower.current.t == 0.5 and follower.current.pieces()[0].tolist() == [1]
     # the twin waits at its last frame: the frame after the dark takes the exit
-    assert follower.twin.t == 0.1 and follower.twin.pending_exits == [(0.3, channel)]
+    assert follower.twin.t == 0.1 and [e[:2] for e in follower.twin.pending_exits] == [
+        (0.3, channel)]
     # a report that comes after the copy moved EXIT_LAG past it: the copy takes it at once
     late = Follower(PARAMS, follower.settings)
     for k in range(1, 16):
