@@ -504,13 +504,13 @@ class Twin:
 
     def measured_exit(self, t: float, channel: int, mass: float = math.nan) -> None:
         """
-        Take an exit a channel's sensor measured: t (s), channel (1-based), mass (kg; NaN:
-        not weighed; a load cell's step).
+        Take an exit a channel's sensor measured: t (s), channel (1-based), mass (kg).
 
-        The first frame stamped at least :data:`EXIT_LAG` s after it takes it (see
-        :meth:`update`). Raises ValueError for a time that is not finite or that a frame
-        already passed (:class:`.live.Follower` goes back for it), a channel not in the
-        layout, or a mass that is neither NaN nor a positive number.
+        mass: the piece's, a load cell's step (NaN: not weighed). The first frame stamped
+        at least :data:`EXIT_LAG` s after it takes it (see :meth:`update`). Raises
+        ValueError for a time that is not finite or that a frame already passed
+        (:class:`.live.Follower` goes back for it), a channel not in the layout, or a mass
+        that is neither NaN nor a positive number.
         """
         channel, mass = self.exit_channel(channel), self.exit_mass(mass)
         if not math.isfinite(t) or t <= self.t - EXIT_LAG:

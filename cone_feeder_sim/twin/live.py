@@ -174,13 +174,13 @@ class Follower:
 
     def measured_exit(self, t: float, channel: int, mass: float = math.nan) -> list[float]:
         """
-        Take an exit a channel's sensor measured at t (s), with its mass (kg; NaN: not
-        weighed); return the stamps analysed again.
+        Take an exit a channel's sensor measured at t (s); return the stamps analysed again.
 
-        The frame stamped :data:`~.estimator.EXIT_LAG` s after it takes it
-        (:meth:`.estimator.Twin.update`); one that comes after that frame was analysed goes
-        back to the twin before it, as a late frame does. Raises ValueError for a channel not
-        in the layout, a mass neither NaN nor positive, or an exit older than the history.
+        mass: the piece's (kg, a load cell's step; NaN: not weighed). The frame stamped
+        :data:`~.estimator.EXIT_LAG` s after it takes it (:meth:`.estimator.Twin.update`);
+        one that comes after that frame was analysed goes back to the twin before it, as a
+        late frame does. Raises ValueError for a channel not in the layout, a mass neither
+        NaN nor positive, or an exit older than the history.
         """
         if not math.isfinite(t):
             raise ValueError(f'measured exit at t = {t} s: not finite')

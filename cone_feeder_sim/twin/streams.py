@@ -92,8 +92,9 @@ def mcap_cone(path: Path, topic: str | None = None, joint: str = 'cone') -> np.n
 
 def mcap_exits(path: Path, topic: str | None = None) -> np.ndarray:
     """
-    Return the measured exits (e, 3), sorted by t: t (s), channel (1-based; NaN: none),
-    mass (kg; NaN: not weighed).
+    Return the measured exits (e, 3), sorted by t.
+
+    Columns: t (s), channel (1-based; NaN: none), mass (kg; NaN: not weighed).
     """
     recording, chosen = _recording(path, topic, ('/exit_events',), 'sensor_msgs/msg/PointCloud2')
     rows = []

@@ -129,6 +129,8 @@ def test_the_twin_follows_the_plant_and_forecasts(context: Any, tmp_path: Path) 
         assert np.all(np.array(forecast.data) >= 0.0)
         assert plant.spin_until(lambda: any(
             m.status[0].message == 'following' for m in plant.received['diagnostics']))
+        values = {v.key: v.value for v in plant.received['diagnostics'][-1].status[0].values}
+        assert float(values['piece mass (kg)']) == MODEL.product.m  # no exit weighed
     finally:
         plant.executor.shutdown()
         twin.destroy_node()
