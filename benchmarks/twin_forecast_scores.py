@@ -160,7 +160,8 @@ def main() -> None:
     params = SimParams(model=model)  # the prior: the twin's and the open loop's
     d, mu_c = (model.product.d, model.product.mu_C) if args.truth is None else args.truth
     truth = SimParams(model=replace(model, product=replace(
-        model.product, d=d, mu_C=mu_c, m=args.plant_mass or model.product.m)))
+        model.product, d=d, mu_C=mu_c,
+        m=model.product.m if args.plant_mass is None else args.plant_mass)))
     print(f'plant d = {d:g}, mu_C = {mu_c:g}, m = {truth.model.product.m:g} kg; '
           f'prior d = {model.product.d:g}, mu_C = {model.product.mu_C:g}, '
           f'm = {model.product.m:g} kg', flush=True)

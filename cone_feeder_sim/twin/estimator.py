@@ -57,7 +57,7 @@ from .enkf import analyse
 from .particles import resample_parameters
 from ..errors import Stopped
 from ..formats.pointcloud import NO_TRACK
-from ..physics.params import product_row, ProductParams
+from ..physics.params import P_M, PRODUCT_LIMITS, product_row, ProductParams
 from ..physics.rotation import rotate_z, RotationProfile
 from ..physics.simulation import (
     add_particles, advance_many, remove_particles, resting_height, SimParams, SimState,
@@ -522,15 +522,38 @@ class Twin:
         """Add a checked exit to those waiting, in time order (at any time: see Follower)."""
         bisect.insort(self.pending_exits, (float(t), int(channel), float(mass)))
 
-    @staticmethod
-    def exit_mass(mass: Any) -> float:
-        """Return mass (kg) as a float; raise ValueError unless it is NaN or positive."""
+    @property
+    def heaviest(self) -> float:
+        """
+        Return the mass (kg) every piece's stays below.
+
+        Above it a piece cannot rest on the cone (:func:`resting_height`: m g cos^2(tilt)
+        < r_f / 2), or the model takes no such product.
+        """
+        model = self.params.model
+        cos_t = math.cos(math.radians(model.cone_tilt))
+        return min(PRODUCT_LIMITS['m'].hi, 0.5 * model.product.r_f / (model.g * cos_t * cos_t))
+
+    def exit_mass(self, mass: Any) -> float:
+        """Return mass (kg) as a float; raise ValueError unless it is NaN or in (0, heaviest)."""
         if isinstance(mass, bool) or not isinstance(mass, (int, float, np.integer,
                                                            np.floating)) or not (
-                math.isnan(mass) or (math.isfinite(mass) and mass > 0.0)):
-            raise ValueError(f'measured exit: mass {mass!r} is not a positive number (kg) '
-                             f'or NaN (not weighed)')
+                math.isnan(mass) or 0.0 < mass < self.heaviest):
+            raise ValueError(f'measured exit: mass {mass!r} is not a number of kg in (0, '
+                             f'{self.heaviest:.4g}) (a heavier piece cannot rest on the '
+                             f'cone) or NaN (not weighed)')
         return float(mass)
+
+    def check_masses(self, masses: np.ndarray | None) -> None:
+        """Raise ValueError if a detection's mass (kg; NaN: not given) is heaviest or more."""
+        if masses is None:
+            return
+        given = np.asarray(masses, dtype=float)
+        given = given[~np.isnan(given)]
+        if len(given) and not given.max() < self.heaviest:
+            raise ValueError(f"a detection's mass of {given.max():.4g} kg is not below "
+                             f'{self.heaviest:.4g} kg (a heavier piece cannot rest on the '
+                             f'cone)')
 
     def exit_channel(self, channel: Any) -> int:
         """Return channel as an int; raise ValueError if it is not one of the layout's."""
@@ -563,6 +586,7 @@ class Twin:
         detections = np.asarray(detections, dtype=float).reshape(-1, detections.shape[-1])
         if not np.isfinite(detections).all():
             raise ValueError('a detection is not finite')
+        self.check_masses(masses)
         if t < self.t:  # a late frame: live.Follower goes back to a snapshot for it
             raise ValueError(f'detections at t = {t} s are older than the twin ({self.t} s)')
         if t > self.t:
@@ -968,13 +992,12 @@ class Twin:
         """Return the state with its products' rows for the member's d and mu_C (log d, mu_C)."""
         if not state.count:
             return state
-        rows: dict[float, np.ndarray] = {}  # one row per mass: the pieces mostly share one
-        for i in state.ids.tolist():
-            mass = self.masses[i]
-            if mass not in rows:
-                rows[mass] = product_row(self._product(member, mass, parameters))
-        return replace(state, products=np.array([rows[self.masses[i]]
-                                                 for i in state.ids.tolist()]))
+        # one row, each piece's mass in its column (no other column depends on the mass):
+        # a row per piece would cost 30 us each, with masses from load cells all differing
+        row = product_row(self._product(member, self.params.model.product.m, parameters))
+        products = np.repeat(row[None, :], state.count, axis=0)
+        products[:, P_M] = [self.masses[i] for i in state.ids.tolist()]
+        return replace(state, products=products)
 
     def _birth(self, xy: np.ndarray, masses: np.ndarray | None, t: float) -> None:
         model = self.params.model

@@ -165,9 +165,10 @@ class Follower:
         A frame waits for the cone speed measured at or after its stamp (the encoder's
         reading of the same instant may arrive just after it): without it the members would
         turn the cone at the speed of the frame before. A newer frame releases the frames
-        that still wait (no encoder: they go on the last speed measured).
+        that still wait (no encoder: they go on the last speed measured). Raises ValueError
+        for a mass a piece cannot have (:meth:`.estimator.Twin.check_masses`).
         """
-        self._start(found.t)
+        self._start(found.t).check_masses(found.masses)  # refused before it waits
         taken = self._take(lambda waiting: True)
         self._waiting.append(found)
         return taken + self._take(lambda waiting: waiting.t <= self._cone_t)
@@ -180,12 +181,12 @@ class Follower:
         :data:`~.estimator.EXIT_LAG` s after it takes it (:meth:`.estimator.Twin.update`);
         one that comes after that frame was analysed goes back to the twin before it, as a
         late frame does. Raises ValueError for a channel not in the layout, a mass neither
-        NaN nor positive, or an exit older than the history.
+        NaN nor in (0, :attr:`~.estimator.Twin.heaviest`), or an exit older than the history.
         """
         if not math.isfinite(t):
             raise ValueError(f'measured exit at t = {t} s: not finite')
-        mass = Twin.exit_mass(mass)
         twin = self._start(t)
+        mass = twin.exit_mass(mass)
         if t > twin.t - EXIT_LAG:
             twin.measured_exit(t, channel, mass)
             self._measured.append((t, int(channel), mass))

@@ -19,9 +19,10 @@ exits up to its stamp are taken; the frame is then associated and analysed
 (:class:`.estimator.Twin`; it takes the exits up to :data:`.estimator.EXIT_LAG` before it).
 Every ``every`` s of stream time the twin forecasts (:func:`.forecast.forecast`, under the
 measured speed held). A bad frame (a coordinate not finite, more than
-:data:`.frames.MAX_DETECTIONS` points, a stamp older than the twin) is refused with one line and
-the twin goes on; so is a cone speed that is not finite, and a measured exit that is not in
-a channel of the layout. The output directory gets:
+:data:`.frames.MAX_DETECTIONS` points, a stamp older than the twin, a mass no piece can
+have) is refused with one line and the twin goes on; so is a cone speed that is not
+finite, and a measured exit that is not in a channel of the layout or whose mass no piece
+can have. The output directory gets:
 
 - ``channel_forecast.csv``: t, horizon, channel, mass, spread (s, s, -, kg, kg);
 - ``pieces.csv``: t, piece, x, y, channel (0: stays), probability, exit_time, track_id (s,

@@ -19,8 +19,8 @@ read as the headless twin's input: each PointCloud2 message of the detections to
 frame at its header's stamp (fields x, y and optionally mass), each JointState message of
 the cone topic one speed of the joint ``cone``, each PointCloud2 message of the exits topic
 the exits measured in it (fields channel and optionally exit_time, else at the header's
-stamp). Topics default to ``/detections`` (else ``/particle_states``, what sim_node
-records), ``/cone_state`` and ``/exit_events``.
+stamp, and mass, a load cell's step). Topics default to ``/detections`` (else
+``/particle_states``, what sim_node records), ``/cone_state`` and ``/exit_events``.
 """
 
 from pathlib import Path

@@ -20,6 +20,7 @@ the detections and the cone speed only.
 """
 
 from dataclasses import replace
+import math
 
 from cone_feeder_sim.physics.params import ModelParams, P_D, P_M
 from cone_feeder_sim.physics.rotation import RotationProfile
@@ -241,9 +242,19 @@ def test_a_bad_measured_exit_is_refused_with_its_reason() -> None:
     for channel in (0, MODEL.channels.count + 1, 2.0, True):
         with pytest.raises(ValueError, match=f'channel {channel!r} is not one of 1..14'):
             twin.measured_exit(0.05, channel)
-    for mass in (0.0, -0.05, float('inf'), True, '0.05'):
-        with pytest.raises(ValueError, match=f'mass {mass!r} is not a positive number'):
+    # a piece heavier than 6.2 kg cannot rest on the cone (r_f 120 N, tilt 7.5 deg): one
+    # load cell in grams (125 for 0.125 kg) would make every piece born after it so
+    assert twin.heaviest == pytest.approx(60.0 / (MODEL.g * math.cos(math.radians(7.5)) ** 2))
+    for mass in (0.0, -0.05, float('inf'), True, '0.05', 125.0, twin.heaviest):
+        with pytest.raises(ValueError, match=f'mass {mass!r} is not a number of kg in '
+                                             r'\(0, 6.222\)'):
             twin.measured_exit(0.05, 3, mass)
+    assert twin.exit_mass(6.2) == 6.2  # heavy, but it rests
+    # a camera's mass too, before the frame changes anything
+    before = twin.snapshot()
+    with pytest.raises(ValueError, match="a detection's mass of 125 kg is not below 6.222"):
+        twin.update(0.6, np.array([[0.05, 0.05], [0.0, 0.1]]), np.array([np.nan, 125.0]))
+    assert twin.t == before.t and twin.pending_exits == before.pending_exits
     twin.update(0.5, np.array([[0.05, 0.05]]))
     with pytest.raises(ValueError, match='older than the frames the twin took'):
         twin.measured_exit(0.5 - EXIT_LAG, 3)

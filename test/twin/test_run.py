@@ -200,8 +200,8 @@ def test_measured_exits_are_read_from_a_recording_or_a_csv(tmp_path: Path) -> No
     logged: list[str] = []
     run_twin(load_twin(tmp_path / 'twin.yaml'), tmp_path / 'csv', logged.append)
     assert logged == ['exit refused: measured exit: channel 15 is not one of 1..14',
-                      'exit refused: measured exit: mass -0.1 is not a positive number (kg) '
-                      'or NaN (not weighed)']
+                      'exit refused: measured exit: mass -0.1 is not a number of kg in (0, '
+                      '6.222) (a heavier piece cannot rest on the cone) or NaN (not weighed)']
     assert read(tmp_path / 'csv' / 'frames.csv') == frames
 
 

@@ -174,6 +174,15 @@ def test_a_late_measured_exit_gives_what_it_gives_in_order() -> None:
         follower.measured_exit(0.55, 15)
 
 
+def test_a_frame_with_a_mass_no_piece_can_have_is_refused_before_it_waits() -> None:
+    follower = Follower(PARAMS, LiveSettings(twin=TwinSettings(members=4, sigma=0.001, seed=3)))
+    xy = np.array([[0.05, 0.05]])
+    with pytest.raises(ValueError, match="a detection's mass of 125 kg is not below"):
+        follower.frame(DetectionFrame(0.1, xy, np.array([125.0]), None))  # grams, as kg
+    assert follower.frame(DetectionFrame(0.2, xy, np.array([0.125]), None)) == []
+    assert follower.frame(DetectionFrame(0.3, xy, None, None)) == [0.2]  # 0.1 never waited
+
+
 def test_in_open_loop_the_moving_copy_takes_the_measured_exits() -> None:
     follower = Follower(PARAMS, LiveSettings(twin=TwinSettings(members=4, sigma=0.001, seed=3),
                                              forecast_period=0.5, open_loop_after=0.2))
