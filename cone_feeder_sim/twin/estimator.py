@@ -510,7 +510,7 @@ class Twin:
         at least :data:`EXIT_LAG` s after it takes it (see :meth:`update`). Raises
         ValueError for a time that is not finite or that a frame already passed
         (:class:`.live.Follower` goes back for it), a channel not in the layout, or a mass
-        that is neither NaN nor a positive number.
+        that is neither NaN nor in (0, :attr:`heaviest`).
         """
         channel, mass = self.exit_channel(channel), self.exit_mass(mass)
         if not math.isfinite(t) or t <= self.t - EXIT_LAG:
