@@ -33,6 +33,12 @@ from workers import SHARED_ENV, worker_domains
 
 def pytest_configure(config: pytest.Config) -> None:
     """Give this process (an xdist worker) a ROS domain of its own, and one numba thread."""
+    if getattr(config.option, 'maxworkerrestart', '') is None:
+        # a worker that crashes (a segfault, pytest-timeout's thread method) is not replaced:
+        # under --dist loadfile a replaced worker can leave the run waiting forever on work
+        # units emptied by the crash (pytest-dev/pytest-xdist#1378, #784). The run then
+        # ends with the crashed test failed and that worker's files left unrun.
+        config.option.maxworkerrestart = '0'
     if getattr(config.option, 'loadscopereorder', False):
         # xdist's loadfile hands out the files with the most tests first unless told not to
         # (--no-loadscope-reorder): keep the collection's order, the slow tests' files first
