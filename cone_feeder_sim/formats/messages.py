@@ -54,6 +54,7 @@ __all__ = [
     'particles_message',
     'stamp',
     'stamp_ns',
+    'stamp_seconds',
     'states_message',
     'TickMessages',
     'TickView',
@@ -72,6 +73,11 @@ def stamp(t: float) -> dict[str, int]:
 def stamp_ns(t: float) -> int:
     """Return t (s) in integer nanoseconds, rounded as :func:`stamp` rounds."""
     return int(round(t * 1e9))
+
+
+def stamp_seconds(value: dict[str, int]) -> float:
+    """Return a builtin_interfaces/Time mapping (sec, nanosec) in seconds."""
+    return value['sec'] + value['nanosec'] * 1e-9
 
 
 def header(t: float, frame_id: str) -> dict[str, Any]:

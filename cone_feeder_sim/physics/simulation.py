@@ -818,6 +818,17 @@ def cone_surface_height(model: ModelParams, x: float, y: float) -> float:
     return model.h * (1.0 - math.hypot(x, y) / model.r)
 
 
+def resting_mass_limit(model: ModelParams, product: ProductParams) -> float:
+    """
+    Return the mass (kg) a piece of product stays below to rest on the cone.
+
+    At rest R_a r_f / 2 = m g cos^2(tilt) with R_a < 1 (:func:`resting_height`): the limit is
+    r_f / (2 g cos^2(tilt)).
+    """
+    cos_t = math.cos(math.radians(model.cone_tilt))
+    return 0.5 * product.r_f / (model.g * cos_t * cos_t)
+
+
 def resting_height(model: ModelParams, product: ProductParams, x: float, y: float) -> float:
     """
     Return z (m) at which a piece at (x, y) rests on the stationary cone.

@@ -61,7 +61,7 @@ from .parameters import declare, model_and_solver_from_values, parameter_specs, 
 from .recording import NodeRecording
 from ..errors import ConeFeederError, Stopped, TwinError
 from ..formats.cdr import CdrCodec
-from ..formats.messages import header, stamp
+from ..formats.messages import header, stamp, stamp_seconds
 from ..formats.parameter_file import load_model_params
 from ..formats.pointcloud import cloud_points
 from ..formats.runlog import run_metadata
@@ -69,7 +69,7 @@ from ..formats.topics import TWIN_TOPICS
 from ..physics.params import Limit
 from ..physics.simulation import SimParams
 from ..twin.estimator import parameter_note, TUNING, TwinSettings
-from ..twin.frames import cone_speed, detection_frame, MAX_FUTURE, measured_exits
+from ..twin.frames import cone_speed, detection_frame, measured_exits, not_ahead
 from ..twin.live import Follower, LiveSettings
 from ..twin.messages import channel_forecast_message, parameters_message, pieces_message
 
@@ -233,16 +233,9 @@ class TwinNode(GuardedNode):
     def _received(self, name: str, data: bytes) -> tuple[dict[str, Any], float]:
         """Decode a message of table topic name, record it; return it and its stamp (s)."""
         msg = self._codec.decode(TWIN_TOPICS[name].type_name, data, strict=False)
-        t = _seconds(msg['header']['stamp'])
+        t = stamp_seconds(msg['header']['stamp'])
         self._outputs.received(name, data, round(t * 1e9))
         return msg, t
-
-    def _not_ahead(self, what: str, t: float, arrival: float) -> None:
-        """Raise TwinError if the stamp t (s) is from the future (see :meth:`_latest`)."""
-        latest = self._latest(arrival)
-        if latest is not None and t > latest + MAX_FUTURE:
-            raise TwinError(f'{what} at t = {t:.4f} s refused: a stamp from the future '
-                            f'({t - latest:.3f} s ahead of the newest input)')
 
     def _refuse(self, text: str) -> None:
         self._refused += 1
@@ -254,7 +247,7 @@ class TwinNode(GuardedNode):
         arrival = _arrival(info)
         before = self._follower.outlook
         try:
-            self._not_ahead('cone speed', t, arrival)
+            not_ahead('cone speed', t, self._latest(arrival))
             omega = cone_speed(t, list(msg['name']), [float(v) for v in msg['velocity']])
             taken = self._follower.cone_speed(t, omega)
         except Stopped:
@@ -293,7 +286,7 @@ class TwinNode(GuardedNode):
         arrival = _arrival(info)
         try:
             msg, t = self._received('exit_events', data)
-            self._not_ahead('exits', t, arrival)
+            not_ahead('exits', t, self._latest(arrival))
             exits = measured_exits(t, cloud_points(msg), self._model.channels.count)
         except (ConeFeederError, ValueError) as exc:
             self._refuse(str(exc))  # the message is refused whole
@@ -386,10 +379,6 @@ class TwinNode(GuardedNode):
                     self.log_at_exit(*closed)
         finally:
             super().destroy_node()
-
-
-def _seconds(value: Any) -> float:
-    return value['sec'] + value['nanosec'] * 1e-9
 
 
 def _arrival(info: Any) -> float:

@@ -60,8 +60,8 @@ from ..formats.pointcloud import NO_TRACK
 from ..physics.params import P_M, PRODUCT_LIMITS, product_row, ProductParams
 from ..physics.rotation import rotate_z, RotationProfile
 from ..physics.simulation import (
-    add_particles, advance_many, remove_particles, resting_height, SimParams, SimState,
-    StepResult, world_from_cone)
+    add_particles, advance_many, remove_particles, resting_height, resting_mass_limit,
+    SimParams, SimState, StepResult, world_from_cone)
 from ..physics.stop import StopFlag
 
 __all__ = ['CALIBRATED_PARTICLES', 'Exit', 'EXIT_LAG', 'EXIT_MATCH', 'Frame', 'MASS_PRIOR',
@@ -297,6 +297,10 @@ class Twin:
         if not settings.loosen >= 1.0:
             raise ValueError(f'loosen must be at least 1, got {settings.loosen}')
         self.params, self.settings = loosened(params, settings.loosen), settings
+        #: the mass (kg) every piece's stays below: above it a piece cannot rest on the cone,
+        #: or the model takes no such product
+        self.heaviest = min(PRODUCT_LIMITS['m'].hi,
+                            resting_mass_limit(self.params.model, self.params.model.product))
         #: the members' params without the pair law: the smoother's (see _start_window)
         model = self.params.model
         self._alone = replace(self.params, model=replace(
@@ -521,18 +525,6 @@ class Twin:
     def pend_exit(self, t: float, channel: int, mass: float = math.nan) -> None:
         """Add a checked exit to those waiting, in time order (at any time: see Follower)."""
         bisect.insort(self.pending_exits, (float(t), int(channel), float(mass)))
-
-    @property
-    def heaviest(self) -> float:
-        """
-        Return the mass (kg) every piece's stays below.
-
-        Above it a piece cannot rest on the cone (:func:`resting_height`: m g cos^2(tilt)
-        < r_f / 2), or the model takes no such product.
-        """
-        model = self.params.model
-        cos_t = math.cos(math.radians(model.cone_tilt))
-        return min(PRODUCT_LIMITS['m'].hi, 0.5 * model.product.r_f / (model.g * cos_t * cos_t))
 
     def exit_mass(self, mass: Any) -> float:
         """Return mass (kg) as a float; raise ValueError unless it is NaN or in (0, heaviest)."""
@@ -1002,7 +994,8 @@ class Twin:
     def _birth(self, xy: np.ndarray, masses: np.ndarray | None, t: float) -> None:
         model = self.params.model
         first = self.states[0].next_id
-        weights = [self.piece_mass if masses is None or not math.isfinite(masses[k])
+        mean = self.piece_mass
+        weights = [mean if masses is None or not math.isfinite(masses[k])
                    else float(masses[k]) for k in range(len(xy))]
         omega = self._profile.omega(self.t)
         grown = []

@@ -28,7 +28,7 @@ from ..errors import TwinError
 from ..formats.pointcloud import NO_TRACK
 
 __all__ = ['cone_speed', 'DetectionFrame', 'detection_frame', 'MAX_DETECTIONS',
-           'exit_columns', 'MAX_FUTURE', 'measured_exits']
+           'exit_columns', 'MAX_FUTURE', 'measured_exits', 'not_ahead']
 
 #: The most detections a frame may hold; a larger frame is refused.
 MAX_DETECTIONS = 10_000
@@ -68,9 +68,7 @@ def detection_frame(t: float, points: np.ndarray, frame_id: str = 'feeder',
                         f'{expected_frame!r}')
     if not math.isfinite(t):
         raise TwinError(f'frame refused: its stamp {t} is not finite')
-    if latest is not None and t > latest + MAX_FUTURE:
-        raise TwinError(f'frame at t = {t:.4f} s refused: a stamp from the future '
-                        f'({t - latest:.3f} s ahead of the newest input)')
+    not_ahead('frame', t, latest)
     if 'x' not in names or 'y' not in names:
         raise TwinError(f'frame at t = {t:.4f} s refused: no x and y fields (it has '
                         f'{", ".join(names) or "none"})')
@@ -112,6 +110,17 @@ def _track_ids(values: np.ndarray) -> np.ndarray | None:
     ids = np.full(len(wide), NO_TRACK, dtype=np.uint32)
     ids[valid] = wide[valid]
     return ids
+
+
+def not_ahead(what: str, t: float, latest: float | None) -> None:
+    """
+    Raise TwinError if an input's stamp t (s) is from the future.
+
+    latest: the newest stamp accepted so far plus the wall time since (s), None: no check.
+    """
+    if latest is not None and t > latest + MAX_FUTURE:
+        raise TwinError(f'{what} at t = {t:.4f} s refused: a stamp from the future '
+                        f'({t - latest:.3f} s ahead of the newest input)')
 
 
 def measured_exits(t: float, points: np.ndarray,

@@ -186,10 +186,10 @@ class Follower:
         if not math.isfinite(t):
             raise ValueError(f'measured exit at t = {t} s: not finite')
         twin = self._start(t)
-        mass = twin.exit_mass(mass)
-        if t > twin.t - EXIT_LAG:
-            twin.measured_exit(t, channel, mass)
-            self._measured.append((t, int(channel), mass))
+        channel, mass = twin.exit_channel(channel), twin.exit_mass(mass)
+        if t > twin.t - EXIT_LAG:  # no frame took it yet (Twin.measured_exit's test)
+            twin.pend_exit(t, channel, mass)
+            self._measured.append((t, channel, mass))
             if self._ahead is not None:  # in the dark, the copy takes it too, now if due
                 self._ahead.pend_exit(t, channel, mass)
                 self._ahead.open_loop_exits()
@@ -198,7 +198,7 @@ class Follower:
         if not later or self._history[later[0]][1].t - EXIT_LAG >= t:
             raise ValueError(f'measured exit at t = {t} s is older than the twin can go back '
                              f'to (max_delay {self.settings.max_delay} s)')
-        self._measured.append((t, twin.exit_channel(channel), mass))
+        self._measured.append((t, channel, mass))
         frames = self._back_to(later[0])
         for found in frames:
             self._analyse(found)

@@ -31,17 +31,13 @@ from .frames import exit_columns
 from ..errors import ConeFeederError, TwinError
 from ..formats.cdr import decode
 from ..formats.mcap_reader import open_recording
+from ..formats.messages import stamp_seconds
 from ..formats.pointcloud import cloud_points
 
 __all__ = ['mcap_cone', 'mcap_detections', 'mcap_exits']
 
 #: The detections topics tried in turn when none is named.
 DETECTION_TOPICS = ('/detections', '/particle_states')
-
-
-def _seconds(stamp: dict) -> float:
-    """Return a header stamp (sec, nanosec) in seconds."""
-    return stamp['sec'] + stamp['nanosec'] * 1e-9
 
 
 def _recording(path: Path, topic: str | None, defaults: tuple[str, ...], type_name: str) -> tuple:
@@ -64,7 +60,7 @@ def mcap_detections(path: Path, topic: str | None = None) -> np.ndarray:
     rows = []
     for message in recording.messages({chosen}):
         cloud = decode(message.type_name, message.data)
-        t = _seconds(cloud['header']['stamp'])
+        t = stamp_seconds(cloud['header']['stamp'])
         points = cloud_points(cloud)
         names = points.dtype.names or ()
         if 'x' not in names or 'y' not in names:
@@ -84,7 +80,7 @@ def mcap_cone(path: Path, topic: str | None = None, joint: str = 'cone') -> np.n
     for message in recording.messages({chosen}):
         state = decode(message.type_name, message.data)
         if joint in state['name'] and len(state['velocity']) > state['name'].index(joint):
-            rows.append([_seconds(state['header']['stamp']),
+            rows.append([stamp_seconds(state['header']['stamp']),
                          float(state['velocity'][state['name'].index(joint)])])
     table = np.array(rows, dtype=float).reshape(-1, 2)
     return table[np.argsort(table[:, 0], kind='stable')]
@@ -100,7 +96,7 @@ def mcap_exits(path: Path, topic: str | None = None) -> np.ndarray:
     rows = []
     for message in recording.messages({chosen}):
         cloud = decode(message.type_name, message.data)
-        rows.append(np.column_stack(exit_columns(_seconds(cloud['header']['stamp']),
+        rows.append(np.column_stack(exit_columns(stamp_seconds(cloud['header']['stamp']),
                                                  cloud_points(cloud))))
     table = np.concatenate(rows) if rows else np.zeros((0, 3))
     return table[np.argsort(table[:, 0], kind='stable')]
