@@ -99,7 +99,7 @@ EXIT_MATCH = 0.2
 #: ... else the piece the camera did not see in the frame, nearest the channel's stretch of
 #: rim and within this distance of it (m), leaves the twin at once.
 RIM_GATE = 0.05
-#: The product's mean piece mass, which a piece born without a camera's mass gets, starts
+#: The product's mean piece mass, which the pieces without a camera's mass have, starts
 #: at the scenario's product mass, worth this many weighed pieces; each measured exit with a
 #: mass (a load cell's step) adds its own (:attr:`Twin.piece_mass`).
 MASS_PRIOR = 5.0
@@ -315,7 +315,11 @@ class Twin:
         self.states = [SimState(t=t0) for _ in range(m)]
         self.times, self.omegas = [t0], [0.0]
         self._profile = RotationProfile(np.array(self.times), np.array(self.omegas))
+        #: each piece's mass (kg) as the forecasts count it: the camera's, or for the pieces
+        #: in _mean_mass the mean piece mass (:attr:`piece_mass`), which follows the load
+        #: cells' weighed exits; the members integrate each with the mass it was born with
         self.masses: dict[int, float] = {}
+        self._mean_mass: set[int] = set()
         self.last_seen: dict[int, float] = {}
         #: the frames each piece was seen in, up to settings.confirm (confirmed there)
         self.hits: dict[int, int] = {}
@@ -366,6 +370,7 @@ class Twin:
         other.rng = copy.deepcopy(self.rng)
         other.times, other.omegas = list(self.times), list(self.omegas)
         other.masses, other.last_seen = dict(self.masses), dict(self.last_seen)
+        other._mean_mass = set(self._mean_mass)
         other.hits, other.tracks = dict(self.hits), dict(self.tracks)
         other._exits, other._left = list(self._exits), list(self._left)
         other._recent_exits = list(self._recent_exits)
@@ -498,7 +503,7 @@ class Twin:
     @property
     def piece_mass(self) -> float:
         """
-        Return the product's mean piece mass (kg) a piece born without a camera's mass gets.
+        Return the product's mean piece mass (kg): the mass of the pieces without a camera's.
 
         The scenario's product mass, worth :data:`MASS_PRIOR` pieces, and the masses of the
         measured exits taken so far (load cells), averaged.
@@ -572,8 +577,8 @@ class Twin:
         no detection of the frame was associated with and that is nearest the channel's
         stretch of rim, within :data:`RIM_GATE`, leaves the twin at the measured time
         (:attr:`Frame.left`), instead of dying ``death_after`` s later while the forecasts
-        still count it. Each weighed exit's mass joins the mean piece mass that pieces born
-        without a camera's mass get (:attr:`piece_mass`), whichever piece it was.
+        still count it. Each weighed exit's mass joins the mean piece mass that the pieces
+        without a camera's mass have (:attr:`piece_mass`), whichever piece it was.
         """
         detections = np.asarray(detections, dtype=float).reshape(-1, detections.shape[-1])
         if not np.isfinite(detections).all():
@@ -661,6 +666,7 @@ class Twin:
         if weighed:
             count, total = self._weighed
             self._weighed = (count + len(weighed), total + math.fsum(weighed))
+            self._follow_piece_mass()
         explained = 0
         layout, radius = self.params.model.channels, self.params.model.r
         taken: list[int] = []
@@ -985,18 +991,25 @@ class Twin:
         if not state.count:
             return state
         # one row, each piece's mass in its column (no other column depends on the mass):
-        # a row per piece would cost 30 us each, with masses from load cells all differing
+        # a row per piece would cost 30 us each, with masses from load cells all differing;
+        # each piece keeps the mass it was born with (see _follow_piece_mass)
         row = product_row(self._product(member, self.params.model.product.m, parameters))
         products = np.repeat(row[None, :], state.count, axis=0)
-        products[:, P_M] = [self.masses[i] for i in state.ids.tolist()]
+        products[:, P_M] = state.products[:, P_M]
         return replace(state, products=products)
+
+    def _follow_piece_mass(self) -> None:
+        """Give the pieces without a camera's mass the mean piece mass, as :attr:`masses` says."""
+        mean = self.piece_mass
+        for i in self._mean_mass:
+            self.masses[i] = mean
 
     def _birth(self, xy: np.ndarray, masses: np.ndarray | None, t: float) -> None:
         model = self.params.model
         first = self.states[0].next_id
         mean = self.piece_mass
-        weights = [mean if masses is None or not math.isfinite(masses[k])
-                   else float(masses[k]) for k in range(len(xy))]
+        camera = [masses is not None and math.isfinite(masses[k]) for k in range(len(xy))]
+        weights = [float(masses[k]) if camera[k] else mean for k in range(len(xy))]
         omega = self._profile.omega(self.t)
         grown = []
         for member, state in enumerate(self.states):
@@ -1010,6 +1023,8 @@ class Twin:
         for k, i in enumerate(ids.tolist()):
             assert i == first + k  # every member numbers its pieces alike
             self.masses[i] = weights[k]
+            if not camera[k]:
+                self._mean_mass.add(i)
             self.last_seen[i] = t
             self.hits[i] = 1
 
@@ -1017,6 +1032,8 @@ class Twin:
         if ids:
             self.states = [remove_particles(s, ids) for s in self.states]
         for i in ids:
+            self.masses.pop(i, None)
+            self._mean_mass.discard(i)
             self.last_seen.pop(i, None)
             self.hits.pop(i, None)
             self.tracks.pop(i, None)

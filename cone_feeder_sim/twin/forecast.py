@@ -62,8 +62,9 @@ class Forecast:
     ids: (n,) the pieces on the cone; channel_probability: (n, C + 1) per piece, column 0
     staying on the cone over the longest horizon and column c channel c (1-based);
     exit_time: (n,) the expected exit time (s; NaN where no member lets it leave);
-    horizons: (H,) s; mass: (H, C) expected mass per channel (kg), mass_spread: (H, C) its
-    standard deviation over the members; riding: how many pieces (summed over the members)
+    horizons: (H,) s; mass: (H, C) expected mass per channel (kg: each piece counted with
+    its mass now, :attr:`.estimator.Twin.masses`), mass_spread: (H, C) its standard
+    deviation over the members; riding: how many pieces (summed over the members)
     were taken to ride with the cone after the probe (module docstring).
     """
 
@@ -104,12 +105,11 @@ def forecast(twin: Twin, horizons: tuple[float, ...] = (0.5, 1.0, 2.0),
     left = np.zeros(len(ids))
     mass = np.zeros((m, len(h), channels))
     for member, exits in ((k, e) for k, parts in enumerate(outcomes) for e in parts):
-        for i, t, c, w in zip(exits.ids.tolist(), exits.t.tolist(), exits.channel.tolist(),
-                              exits.mass.tolist()):
+        for i, t, c in zip(exits.ids.tolist(), exits.t.tolist(), exits.channel.tolist()):
             k = index.get(i)
             if k is None:  # a tentative piece (twin.pieces): not counted until confirmed
                 continue
-            mass[member, :, c - 1] += w * (t <= t0 + h)
+            mass[member, :, c - 1] += twin.masses[i] * (t <= t0 + h)
             counts[k, c] += 1
             times[k] += t
             left[k] += 1

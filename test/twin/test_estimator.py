@@ -210,9 +210,10 @@ def test_an_exit_the_twin_let_happen_explains_the_measured_one() -> None:
     assert np.array_equal(twin.pieces()[1], alone.pieces()[1])
 
 
-def test_weighed_exits_give_the_mass_of_the_pieces_born_after_them() -> None:
+def test_weighed_exits_give_the_mass_of_the_pieces_without_a_camera_mass() -> None:
     # load cells: each weighed exit's mass joins the product's, worth MASS_PRIOR pieces; a
-    # piece born without a camera's mass gets the mean, one with a camera's mass keeps it
+    # piece without a camera's mass has the mean, the pieces on the cone as well as those
+    # born after; one with a camera's mass keeps it
     channel = int(MODEL.channels.channel_of(0.0))
     twin = rim_twin()
     assert twin.piece_mass == MODEL.product.m
@@ -220,21 +221,34 @@ def test_weighed_exits_give_the_mass_of_the_pieces_born_after_them() -> None:
     twin.measured_exit(0.11, int(MODEL.channels.channel_of(180.0)))  # not weighed
     twin.measured_exit(0.12, int(MODEL.channels.channel_of(180.0)), 0.1)  # no piece there
     inner = np.array([[0.05, 0.05]])
+    assert twin.masses[1] == MODEL.product.m
     frame = twin.update(0.1 + EXIT_LAG, inner)
     assert frame.measured == 1 and twin.pieces()[0].tolist() == [1]
     assert frame.left == (Exit(piece=0, t=0.1, channel=channel, mass=0.2),)  # as weighed
+    assert set(twin.masses) == {1}  # the piece that left is forgotten
     mean = (MASS_PRIOR * MODEL.product.m + 0.2) / (MASS_PRIOR + 1)
     assert twin.piece_mass == pytest.approx(mean, rel=1e-15)
+    assert twin.masses[1] == twin.piece_mass  # on the cone before the exit: the mean now
     assert twin.update(0.12 + EXIT_LAG, inner).measured == 2
     mean = (MASS_PRIOR * MODEL.product.m + 0.3) / (MASS_PRIOR + 2)
     assert twin.piece_mass == pytest.approx(mean, rel=1e-15)
     born = np.array([[0.05, 0.05], [-0.05, -0.05], [0.0, -0.1]])
     twin.update(0.25, born, np.array([np.nan, np.nan, 0.03]))
     assert twin.pieces()[0].tolist() == [1, 2, 3]
-    assert twin.masses[1] == MODEL.product.m  # born before
-    assert twin.masses[2] == twin.piece_mass and twin.masses[3] == 0.03
-    # the members simulate the newborn with that mass
-    assert all(s.products[list(s.ids).index(2)][P_M] == twin.piece_mass for s in twin.states)
+    assert twin.masses[1] == twin.masses[2] == twin.piece_mass and twin.masses[3] == 0.03
+    # the members simulate each piece with the mass it was born with (the forecasts count
+    # its mass now: test_forecast.py)
+    born_with = [MODEL.product.m, twin.piece_mass, 0.03]
+    assert all(s.products[:, P_M].tolist() == born_with for s in twin.states)
+    # a weighed exit with the camera off (no piece near its channel: the mass alone counts)
+    twin.measured_exit(0.3, channel, 0.4)
+    twin.predict(0.3 + EXIT_LAG)
+    assert twin.open_loop_exits() == () and twin.pieces()[0].tolist() == [1, 2, 3]
+    mean = (MASS_PRIOR * MODEL.product.m + 0.7) / (MASS_PRIOR + 3)
+    assert twin.piece_mass == pytest.approx(mean, rel=1e-15) and twin.piece_mass > 0.15
+    assert twin.masses[1] == twin.masses[2] == twin.piece_mass and twin.masses[3] == 0.03
+    twin.update(0.5, born)  # an analysis rebuilds the members' rows: the masses stay
+    assert all(s.products[:, P_M].tolist() == born_with for s in twin.states)
 
 
 def test_a_bad_measured_exit_is_refused_with_its_reason() -> None:

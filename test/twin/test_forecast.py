@@ -21,11 +21,11 @@ the twin's most likely channel against the channel it left by, and against a
 constant-velocity extrapolation of its last two detections to the rim.
 """
 
-from cone_feeder_sim.physics.params import ModelParams
+from cone_feeder_sim.physics.params import ModelParams, P_M
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
-from cone_feeder_sim.twin.estimator import Exit, Twin, TwinSettings
+from cone_feeder_sim.twin.estimator import Exit, EXIT_LAG, Twin, TwinSettings
 from cone_feeder_sim.twin.forecast import forecast
 import numpy as np
 import pytest
@@ -137,3 +137,31 @@ def test_pieces_riding_with_the_cone_leave_the_forecast_as_they_were() -> None:
     # a cone speed that changes within the horizon: every piece is integrated
     assert forecast(twin, rotation=RotationProfile.from_table(
         [[0.6, 7.0], [1.0, 9.0]])).riding == 0
+
+
+def test_the_channel_masses_count_each_piece_s_mass_now() -> None:
+    # a load cell weighs a piece heavier than the prior's: the pieces on the cone without a
+    # camera's mass now count the new mean piece mass, though the members go on integrating
+    # them with the mass they were born with; each channel's expected mass over the
+    # horizon is then each piece's mass times its probability of that channel
+    profile = RotationProfile.from_table([[0.0, 0.0], [0.5, 7.0]])
+    rng = np.random.default_rng(5)
+    radius, angle = rng.uniform(0.06, 0.2, 12), rng.uniform(0.0, 2.0 * np.pi, 12)
+    places = list(zip(radius * np.cos(angle), radius * np.sin(angle)))
+    twin = Twin(PARAMS, TwinSettings(members=8, sigma=0.001, seed=2))
+    noise = np.random.default_rng(0)
+    for t, omega, _, seen in plant_frames(PARAMS, profile, places, 0.6):
+        twin.cone_speed(t, omega)
+        twin.update(t, seen + noise.normal(0.0, 0.001, seen.shape))
+    twin.measured_exit(twin.t + 0.01, 1, 1.0)
+    twin.predict(twin.t + 0.01 + EXIT_LAG)
+    twin.open_loop_exits()
+    ids = twin.pieces()[0]
+    assert twin.piece_mass > 0.2 and {twin.masses[i] for i in ids.tolist()} == {
+        twin.piece_mass}
+    assert all(np.all(s.products[:, P_M] == MODEL.product.m) for s in twin.states)
+    result = forecast(twin, (0.5, 2.0), rotation=profile)
+    masses = np.array([twin.masses[i] for i in ids.tolist()])
+    assert result.mass[-1].sum() > 0.5  # pieces leave: a real test
+    np.testing.assert_allclose(result.mass[-1], masses @ result.channel_probability[:, 1:],
+                               rtol=1e-12)
