@@ -251,6 +251,21 @@ def test_weighed_exits_give_the_mass_of_the_pieces_without_a_camera_mass() -> No
     assert all(s.products[:, P_M].tolist() == born_with for s in twin.states)
 
 
+def test_a_piece_no_member_holds_any_more_is_forgotten() -> None:
+    # half the members let a piece go in one prediction, the rest in a later one: it was in
+    # no majority (no exit of the twin's), and once no member holds it, it is forgotten
+    twin = rim_twin()
+    assert set(twin.masses) == set(twin.last_seen) == set(twin.hits) == {0, 1}
+    assert twin._mean_mass == {0, 1}
+    twin.states = [remove_particles(s, [0]) if k < 2 else s for k, s in enumerate(twin.states)]
+    twin.predict(0.1)
+    assert set(twin.masses) == set(twin.last_seen) == {0, 1}  # two members hold it
+    twin.states = twin.states[:2] + [remove_particles(s, [0]) for s in twin.states[2:]]
+    twin.predict(0.15)
+    assert set(twin.masses) == set(twin.last_seen) == set(twin.hits) == {1}
+    assert twin._mean_mass == {1} and twin.pieces()[0].tolist() == [1]
+
+
 def test_a_bad_measured_exit_is_refused_with_its_reason() -> None:
     twin = rim_twin()
     for channel in (0, MODEL.channels.count + 1, 2.0, True):
