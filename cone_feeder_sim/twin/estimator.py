@@ -45,6 +45,7 @@ isotropic in x, y, so its covariance does not change).
 """
 
 import bisect
+from collections import Counter
 import copy
 from dataclasses import dataclass, replace
 import math
@@ -329,6 +330,8 @@ class Twin:
         #: among them the twin saw (confirmed pieces)
         self._exits: list[int] = []
         self._left: list[Exit] = []
+        #: where and when members let each piece on the cone go: (t (s), channel) each
+        self._leaving: dict[int, list[tuple[float, int]]] = {}
         #: the exits the members let happen in the last second, not yet matched with a
         #: measured one: (t (s), channel) each; the measured exits no frame took yet: (t
         #: (s), channel, mass (kg; NaN: not weighed)) each
@@ -374,6 +377,7 @@ class Twin:
         other.hits, other.tracks = dict(self.hits), dict(self.tracks)
         other._exits, other._left = list(self._exits), list(self._left)
         other._recent_exits = list(self._recent_exits)
+        other._leaving = {i: list(e) for i, e in self._leaving.items()}
         other.pending_exits = list(self.pending_exits)
         other._smoother = None if self._smoother is None else list(self._smoother)
         other._predicted, other._observed = list(self._predicted), list(self._observed)
@@ -455,15 +459,15 @@ class Twin:
                     self._departed[(k, failure.particle_id)] = xy
             results = results[:m]
         self.states = [r.state for r in results]
-        gone: dict[int, int] = {}
-        seen: dict[int, list[tuple[float, int]]] = {}
+        seen = self._leaving
         for r in results:
-            for i in r.exits.ids.tolist() + [f.particle_id for f in r.failures]:
-                gone[i] = gone.get(i, 0) + 1
             for i, t, c in zip(r.exits.ids.tolist(), r.exits.t.tolist(),
                                r.exits.channel.tolist()):
                 seen.setdefault(i, []).append((t, c))
-        dropped = [i for i, count in gone.items() if 2 * count > m]
+        # gone from most members, in this prediction or over several (an exit or a failed
+        # integration each); the rest of the members drop it too
+        held = Counter(np.concatenate([s.ids for s in self.states]).tolist())
+        dropped = [i for i in self.last_seen if 2 * (m - held.get(i, 0)) > m]
         self._exits += dropped
         for i in dropped:
             if i not in seen:
@@ -474,12 +478,6 @@ class Twin:
             if self.hits.get(i, 0) >= self.settings.confirm:
                 self._left.append(Exit(piece=i, t=when, channel=channel, mass=self.masses[i]))
         self._drop(dropped)
-        # a piece half the members let go in one prediction and the rest in a later one is
-        # in no member and was in no majority: forgotten (its dictionaries would grow
-        # without end in a node that runs for days: 2 of 208 pieces over 20 s of
-        # benchmarks/twin_forecast_scores.py's plant at 16 members)
-        held = set(np.concatenate([s.ids for s in self.states]).tolist())
-        self._forget([i for i in self.last_seen if i not in held])
 
     def pieces(self, tentative: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
@@ -1037,11 +1035,8 @@ class Twin:
     def _drop(self, ids: list[int]) -> None:
         if ids:
             self.states = [remove_particles(s, ids) for s in self.states]
-        self._forget(ids)
-
-    def _forget(self, ids: list[int]) -> None:
-        """Forget what the twin knows of pieces ids, which no member holds any more."""
         for i in ids:
+            self._leaving.pop(i, None)
             self.masses.pop(i, None)
             self._mean_mass.discard(i)
             self.last_seen.pop(i, None)
