@@ -22,7 +22,8 @@ measured speed held). A bad frame (a coordinate not finite, more than
 :data:`.frames.MAX_DETECTIONS` points, a stamp older than the twin, a mass no piece can
 have) is refused with one line and the twin goes on; so is a cone speed that is not
 finite, and a measured exit that is not in a channel of the layout or whose mass no piece
-can have. The output directory gets:
+can have (a recording's exits message with one is refused whole, as twin_node refuses it:
+:func:`.streams.mcap_exits`). The output directory gets:
 
 - ``channel_forecast.csv``: t, horizon, channel, mass, spread (s, s, -, kg, kg);
 - ``pieces.csv``: t, piece, x, y, channel (0: stays), probability, exit_time, track_id (s,
@@ -95,6 +96,8 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
     ends = list(starts[1:]) + [len(spec.detections)]
     cone = iter(spec.cone.tolist())
     pending = next(cone, None)
+    for reason in spec.refused_exits:  # messages refused whole, as twin_node refuses them
+        log(reason)
     exits = iter(spec.exits.tolist())
     measured = next(exits, None)
     frames = refused = forecasts = observed = 0

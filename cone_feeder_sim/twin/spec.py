@@ -77,7 +77,8 @@ class TwinSpec:
     t (s), omega (rad/s), sorted; members, sigma (m), horizons (s), every (s), seed as in the file;
     tuning: the other estimator settings the file sets (:data:`TUNING`); exits: (e, 3) rows
     t (s), channel, mass (kg) (NaN: not given; checked when the twin takes them), sorted,
-    the measured exits (none without the key).
+    the measured exits (none without the key); refused_exits: why an MCAP file's exits
+    messages were refused whole, as twin_node refuses them (:func:`.streams.mcap_exits`).
     """
 
     scenario: Scenario
@@ -90,6 +91,7 @@ class TwinSpec:
     seed: int = 0
     tuning: dict[str, float] = field(default_factory=dict)
     exits: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    refused_exits: tuple[str, ...] = ()
 
     def settings(self) -> TwinSettings:
         """Return the estimator's settings: the file's, the scenario's product as the prior."""
@@ -167,11 +169,14 @@ def load_twin(path: str | Path) -> TwinSpec:
                   else _rows(found, ('t', 'x', 'y'), ('mass', 'track_id')))
     cone = (mcap_cone(speeds, content.get('cone_topic')) if speeds.suffix == '.mcap'
             else _rows(speeds, ('t', 'omega'), ()))
-    exits = np.zeros((0, 3))
+    exits, refused = np.zeros((0, 3)), ()
     if 'exits' in content:
         measured = base / content['exits']
-        exits = (mcap_exits(measured, content.get('exits_topic')) if measured.suffix == '.mcap'
-                 else _rows(measured, ('t', 'channel'), ('mass',)))
+        if measured.suffix == '.mcap':
+            exits, refused = mcap_exits(measured, scenario.model.channels.count,
+                                        content.get('exits_topic'))
+        else:
+            exits = _rows(measured, ('t', 'channel'), ('mass',))
     horizons = content.get('horizons', [0.5, 1.0, 2.0])
     if (not isinstance(horizons, list) or not horizons or any(
             isinstance(h, bool) or not isinstance(h, (int, float)) or not 0 < h <= 60
@@ -179,6 +184,7 @@ def load_twin(path: str | Path) -> TwinSpec:
         raise TwinError(f'horizons must be a list of numbers in (0, 60] s, got {horizons!r}')
     return TwinSpec(
         scenario=scenario, detections=detections, cone=cone, exits=exits,
+        refused_exits=refused,
         members=_number(content, 'members', TwinSettings.members, 2, integer=True),
         sigma=float(_number(content, 'sigma', 0.002, 1e-6)),
         horizons=tuple(sorted(float(h) for h in horizons)),

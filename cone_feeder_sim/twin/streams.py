@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .frames import exit_columns
+from .frames import measured_exits
 from ..errors import ConeFeederError, TwinError
 from ..formats.cdr import decode
 from ..formats.mcap_reader import open_recording
@@ -86,17 +86,25 @@ def mcap_cone(path: Path, topic: str | None = None, joint: str = 'cone') -> np.n
     return table[np.argsort(table[:, 0], kind='stable')]
 
 
-def mcap_exits(path: Path, topic: str | None = None) -> np.ndarray:
+def mcap_exits(path: Path, channels: int,
+               topic: str | None = None) -> tuple[np.ndarray, tuple[str, ...]]:
     """
-    Return the measured exits (e, 3), sorted by t.
+    Return the measured exits (e, 3), sorted by t, and why messages were refused.
 
-    Columns: t (s), channel (1-based; NaN: none), mass (kg; NaN: not weighed).
+    Columns: t (s), channel (1-based), mass (kg; NaN: not weighed). channels: the layout's
+    count. A message is checked as twin_node checks it (:func:`.frames.measured_exits`):
+    one with an exit that is not one is refused whole, its reason returned, so that a
+    node's recording run again takes the exits the node took.
     """
     recording, chosen = _recording(path, topic, ('/exit_events',), 'sensor_msgs/msg/PointCloud2')
-    rows = []
+    rows: list[tuple[float, int, float]] = []
+    refused = []
     for message in recording.messages({chosen}):
         cloud = decode(message.type_name, message.data)
-        rows.append(np.column_stack(exit_columns(stamp_seconds(cloud['header']['stamp']),
-                                                 cloud_points(cloud))))
-    table = np.concatenate(rows) if rows else np.zeros((0, 3))
-    return table[np.argsort(table[:, 0], kind='stable')]
+        try:
+            rows += measured_exits(stamp_seconds(cloud['header']['stamp']),
+                                   cloud_points(cloud), channels)
+        except TwinError as exc:
+            refused.append(str(exc))
+    table = np.array(rows, dtype=float).reshape(-1, 3)
+    return table[np.argsort(table[:, 0], kind='stable')], tuple(refused)

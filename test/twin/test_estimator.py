@@ -275,7 +275,7 @@ def test_a_bad_measured_exit_is_refused_with_its_reason() -> None:
         with pytest.raises(ValueError, match=f'channel {channel!r} is not one of 1..14'):
             twin.measured_exit(0.05, channel)
     # a piece heavier than 6.2 kg cannot rest on the cone (r_f 120 N, tilt 7.5 deg): one
-    # load cell in grams (125 for 0.125 kg) would make every piece born after it so
+    # load cell in grams (125 for 0.125 kg) would make every piece without a camera's mass so
     assert twin.heaviest == pytest.approx(60.0 / (MODEL.g * math.cos(math.radians(7.5)) ** 2))
     for mass in (0.0, -0.05, float('inf'), True, '0.05', 125.0, twin.heaviest):
         with pytest.raises(ValueError, match=f'mass {mass!r} is not a number of kg in '

@@ -21,7 +21,7 @@ from cone_feeder_sim.errors import TwinError
 from cone_feeder_sim.formats.mcap_reader import open_recording
 from cone_feeder_sim.formats.mcap_writer import McapRecorder
 from cone_feeder_sim.formats.messages import cloud_message, cone_state_message, header
-from cone_feeder_sim.formats.pointcloud import DETECTION_DTYPE, NO_TRACK
+from cone_feeder_sim.formats.pointcloud import DETECTION_DTYPE, EXIT_DTYPE, NO_TRACK
 from cone_feeder_sim.physics.params import ModelParams
 from cone_feeder_sim.physics.rotation import RotationProfile
 from cone_feeder_sim.physics.simulation import (
@@ -203,6 +203,24 @@ def test_measured_exits_are_read_from_a_recording_or_a_csv(tmp_path: Path) -> No
                       'exit refused: measured exit: mass -0.1 is not a number of kg in (0, '
                       '6.222) (a heavier piece cannot rest on the cone) or NaN (not weighed)']
     assert read(tmp_path / 'csv' / 'frames.csv') == frames
+    # a recording's: a message with an exit that is not one is refused whole, as twin_node
+    # refuses it, the other messages taken
+    points = np.zeros(2, dtype=EXIT_DTYPE)
+    points['channel'], points['exit_time'], points['mass'] = [3, 15], [0.85, 0.86], np.nan
+    good = np.zeros(1, dtype=EXIT_DTYPE)
+    good['channel'], good['exit_time'], good['mass'] = int(event['channel']), float(
+        event['t']), MODEL.product.m
+    with McapRecorder(tmp_path / 'sensors.mcap') as recorder:
+        for when, cloud in ((0.8, good), (0.9, points)):
+            recorder.write('/exit_events', 'sensor_msgs/msg/PointCloud2',
+                           cloud_message(header(when, 'feeder'), cloud), round(when * 1e9))
+    (tmp_path / 'twin.yaml').write_text(yaml.safe_dump({**twin, 'exits': 'sensors.mcap'}))
+    spec = load_twin(tmp_path / 'twin.yaml')
+    assert spec.exits.tolist() == [[float(event['t']), int(event['channel']), MODEL.product.m]]
+    logged.clear()
+    run_twin(spec, tmp_path / 'mcap', logged.append)
+    assert logged == ['exits at t = 0.9000 s refused: a channel not in 1..14']
+    assert read(tmp_path / 'mcap' / 'frames.csv') == frames
 
 
 def test_a_camera_s_track_ids_are_read_from_a_recording(tmp_path: Path) -> None:
