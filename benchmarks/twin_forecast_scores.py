@@ -31,6 +31,7 @@ Scores:
   persistence (the last window's masses), climatology (each channel's mean rate over the
   run) and the empty forecast (none).
 
+The twin's d and mu_C at the end (mean +- spread over its values) are printed too.
 With --exits the twin also takes the plant's exits as a channel's sensors would report them
 (each at the end of the frame's step in which it happened), and the count of them it
 explained is printed; with --weighed too each comes with the piece's mass (a load cell's
@@ -224,6 +225,9 @@ def main() -> None:
                      'open loop': open_mass, 'constant velocity': line_mass}
     wall = time.perf_counter() - start
     print(f'{len(exits)} exits, {len(picks)} forecasts, {wall:.1f} s wall', flush=True)
+    print("the twin's parameters at the end: " + ', '.join(
+        f'{key} {mean:.4g} +- {spread:.2g}' for key, (mean, spread) in twin.parameters().items()),
+        flush=True)
     if args.exits:
         print(f'measured exits: {fed} given, {explained} explained in frames, twin piece '
               f'mass {twin.piece_mass:.4f} kg, '
