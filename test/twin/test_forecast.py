@@ -114,19 +114,29 @@ def test_the_exits_the_twin_saw_are_the_plant_s(scored: dict) -> None:
     assert scored['right exits'] == scored['twin exits']
 
 
-def test_pieces_riding_with_the_cone_leave_the_forecast_as_they_were() -> None:
-    # twelve pieces on a cone spun up to 7 rad/s: 0.6 s in, some are held by friction,
-    # others slide out. Forecasts with the riders taken out after the probe, and with every
-    # piece integrated to the horizon, say the same
-    profile = RotationProfile.from_table([[0.0, 0.0], [0.5, 7.0]])
+#: The cone of :func:`spun_up`: up to 7 rad/s in 0.5 s.
+SPIN = RotationProfile.from_table([[0.0, 0.0], [0.5, 7.0]])
+
+
+@pytest.fixture(scope='module')
+def spun_up() -> Twin:
+    """Return a twin of twelve pieces on a cone spun up to 7 rad/s, 0.6 s in (not to change)."""
     rng = np.random.default_rng(5)
     radius, angle = rng.uniform(0.06, 0.2, 12), rng.uniform(0.0, 2.0 * np.pi, 12)
     places = list(zip(radius * np.cos(angle), radius * np.sin(angle)))
     twin = Twin(PARAMS, TwinSettings(members=8, sigma=0.001, seed=2))
     noise = np.random.default_rng(0)
-    for t, omega, _, seen in plant_frames(PARAMS, profile, places, 0.6):
+    for t, omega, _, seen in plant_frames(PARAMS, SPIN, places, 0.6):
         twin.cone_speed(t, omega)
         twin.update(t, seen + noise.normal(0.0, 0.001, seen.shape))
+    return twin
+
+
+def test_pieces_riding_with_the_cone_leave_the_forecast_as_they_were(spun_up: Twin) -> None:
+    # 0.6 s in, some pieces are held by friction, others slide out. Forecasts with the
+    # riders taken out after the probe, and with every piece integrated to the horizon,
+    # say the same (a forecast leaves the twin as it was)
+    twin = spun_up
     short, full = forecast(twin), forecast(twin, riders=False)
     assert 0 < short.riding < 8 * len(short.ids) and full.riding == 0
     np.testing.assert_array_equal(short.ids, full.ids)
@@ -139,20 +149,12 @@ def test_pieces_riding_with_the_cone_leave_the_forecast_as_they_were() -> None:
         [[0.6, 7.0], [1.0, 9.0]])).riding == 0
 
 
-def test_the_channel_masses_count_each_piece_s_mass_now() -> None:
+def test_the_channel_masses_count_each_piece_s_mass_now(spun_up: Twin) -> None:
     # a load cell weighs a piece heavier than the prior's: the pieces on the cone without a
     # camera's mass now count the new mean piece mass, though the members go on integrating
     # them with the mass they were born with; each channel's expected mass over the
     # horizon is then each piece's mass times its probability of that channel
-    profile = RotationProfile.from_table([[0.0, 0.0], [0.5, 7.0]])
-    rng = np.random.default_rng(5)
-    radius, angle = rng.uniform(0.06, 0.2, 12), rng.uniform(0.0, 2.0 * np.pi, 12)
-    places = list(zip(radius * np.cos(angle), radius * np.sin(angle)))
-    twin = Twin(PARAMS, TwinSettings(members=8, sigma=0.001, seed=2))
-    noise = np.random.default_rng(0)
-    for t, omega, _, seen in plant_frames(PARAMS, profile, places, 0.6):
-        twin.cone_speed(t, omega)
-        twin.update(t, seen + noise.normal(0.0, 0.001, seen.shape))
+    twin = spun_up.snapshot()
     twin.measured_exit(twin.t + 0.01, 1, 1.0)
     twin.predict(twin.t + 0.01 + EXIT_LAG)
     twin.open_loop_exits()
@@ -160,7 +162,7 @@ def test_the_channel_masses_count_each_piece_s_mass_now() -> None:
     assert twin.piece_mass > 0.2 and {twin.masses[i] for i in ids.tolist()} == {
         twin.piece_mass}
     assert all(np.all(s.products[:, P_M] == MODEL.product.m) for s in twin.states)
-    result = forecast(twin, (0.5, 2.0), rotation=profile)
+    result = forecast(twin, (0.5, 2.0), rotation=SPIN)
     masses = np.array([twin.masses[i] for i in ids.tolist()])
     assert result.mass[-1].sum() > 0.5  # pieces leave: a real test
     np.testing.assert_allclose(result.mass[-1], masses @ result.channel_probability[:, 1:],
