@@ -35,8 +35,8 @@ The twin's d and mu_C at the end (mean +- spread over its values) are printed to
 With --exits the twin also takes the plant's exits as a channel's sensors would report them
 (each at the end of the frame's step in which it happened), and the count of them it
 explained is printed; with --weighed too each comes with the piece's mass (a load cell's
-step: the twin's mean piece mass, which its newborn pieces get, is printed). --plant-mass
-gives the plant's pieces another mass than the prior's (0.125 kg)::
+step: the twin's mean piece mass, the mass of its pieces without a camera's, is
+printed). --plant-mass gives the plant's pieces another mass than the prior's (0.125 kg)::
 
     .venv/bin/python benchmarks/twin_forecast_scores.py [--seconds 12] [--members 16] [--seed 1]
         [--truth 315 0.78] [--particles 32] [--smoother-pieces 6] [--exits [--weighed]]

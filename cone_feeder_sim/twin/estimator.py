@@ -188,8 +188,8 @@ class Frame:
     """
     What one frame of detections did.
 
-    t (s); associated, births, deaths, exits: counts (exits: pieces that left the cone in
-    most members since the frame before, or at a measured exit; left: those of them
+    t (s); associated, births, deaths, exits: counts (exits: pieces the predictions since
+    the frame before found gone from most members, or at a measured exit; left: those of them
     confirmed, :class:`Exit`); nis: the analysis's normalised innovation squared and
     observed: its degrees of freedom (2 per associated piece); measured: the measured exits
     the frame took, and explained: those of them that were an exit of the twin's or took a
@@ -437,7 +437,8 @@ class Twin:
         Advance every member to t1 (s); pieces that left in most members are dropped.
 
         Each confirmed piece dropped so is an exit the twin saw (:attr:`Frame.left`): the
-        members' mean exit time, the channel most of them give, the piece's mass.
+        members' median exit time (over this prediction and those before), the channel most
+        of them give, the piece's mass.
         """
         m = len(self.states)
         smoother = self._smoother or []
@@ -472,8 +473,8 @@ class Twin:
         for i in dropped:
             if i not in seen:
                 continue
-            times, channels = zip(*seen[i])
-            when, channel = float(np.mean(times)), int(np.bincount(channels).argmax())
+            times, channels = zip(*seen[i])  # the median: members' exits can be far apart
+            when, channel = float(np.median(times)), int(np.bincount(channels).argmax())
             self._recent_exits.append((when, channel))
             if self.hits.get(i, 0) >= self.settings.confirm:
                 self._left.append(Exit(piece=i, t=when, channel=channel, mass=self.masses[i]))
@@ -576,7 +577,7 @@ class Twin:
         it (:attr:`tracks`).
 
         The frame takes the measured exits (:meth:`measured_exit`) up to t - :data:`EXIT_LAG`.
-        One that an exit of the twin's (members' mean time, their channel) within
+        One that an exit of the twin's (members' median time, their channel) within
         :data:`EXIT_MATCH` s and one channel explains changes nothing; else the piece that
         no detection of the frame was associated with and that is nearest the channel's
         stretch of rim, within :data:`RIM_GATE`, leaves the twin at the measured time
@@ -626,7 +627,9 @@ class Twin:
                 self.tracks.update((first + n, int(track_ids[k])) for n, k in enumerate(born)
                                    if track_ids[k] != NO_TRACK)
         confirm, settings = self.settings.confirm, self.settings
-        dead = [i for i in ids.tolist()
+        # every piece the twin knows, not only those every member holds: one that some
+        # members let go is in no output and no association, and dies unseen
+        dead = [i for i in self.last_seen
                 if t - self.last_seen.get(i, t) > (settings.death_after
                                                    if self.hits.get(i, 0) >= confirm
                                                    else settings.tentative_after)]

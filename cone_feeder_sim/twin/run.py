@@ -22,8 +22,9 @@ measured speed held). A bad frame (a coordinate not finite, more than
 :data:`.frames.MAX_DETECTIONS` points, a stamp older than the twin, a mass no piece can
 have) is refused with one line and the twin goes on; so is a cone speed that is not
 finite, and a measured exit that is not in a channel of the layout or whose mass no piece
-can have (a recording's exits message with one is refused whole, as twin_node refuses it:
-:func:`.streams.mcap_exits`). The output directory gets:
+can have (in a recording, a channel not in the layout or a mass that is not positive
+refuses its exits message whole, as twin_node refuses it: :func:`.streams.mcap_exits`).
+The output directory gets:
 
 - ``channel_forecast.csv``: t, horizon, channel, mass, spread (s, s, -, kg, kg);
 - ``pieces.csv``: t, piece, x, y, channel (0: stays), probability, exit_time, track_id (s,
@@ -96,8 +97,8 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
     ends = list(starts[1:]) + [len(spec.detections)]
     cone = iter(spec.cone.tolist())
     pending = next(cone, None)
-    for reason in spec.refused_exits:  # messages refused whole, as twin_node refuses them
-        log(reason)
+    unfit = iter(spec.refused_exits)  # messages refused whole, as twin_node refuses them
+    bad = next(unfit, None)
     exits = iter(spec.exits.tolist())
     measured = next(exits, None)
     frames = refused = forecasts = observed = 0
@@ -116,6 +117,9 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
                 except ValueError as exc:
                     log(f'cone speed refused: {exc}')
                 pending = next(cone, None)
+            while bad is not None and bad[0] <= t:
+                log(bad[1])
+                bad = next(unfit, None)
             while measured is not None and measured[0] <= t:
                 try:
                     when, channel, mass = measured
@@ -152,6 +156,9 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
                 forecasts += 1
                 while due <= t + 1e-9:
                     due += spec.every
+    while bad is not None:  # after the last frame
+        log(bad[1])
+        bad = next(unfit, None)
     write_report(out)
     return TwinSummary(frames=frames, refused=refused, forecasts=forecasts, nis=nis,
                        observed=observed)

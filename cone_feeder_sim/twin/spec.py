@@ -77,8 +77,8 @@ class TwinSpec:
     t (s), omega (rad/s), sorted; members, sigma (m), horizons (s), every (s), seed as in the file;
     tuning: the other estimator settings the file sets (:data:`TUNING`); exits: (e, 3) rows
     t (s), channel, mass (kg) (NaN: not given; checked when the twin takes them), sorted,
-    the measured exits (none without the key); refused_exits: why an MCAP file's exits
-    messages were refused whole, as twin_node refuses them (:func:`.streams.mcap_exits`).
+    the measured exits (none without the key); refused_exits: (t (s), why) of each MCAP
+    exits message refused whole, as twin_node refuses it (:func:`.streams.mcap_exits`).
     """
 
     scenario: Scenario
@@ -91,7 +91,7 @@ class TwinSpec:
     seed: int = 0
     tuning: dict[str, float] = field(default_factory=dict)
     exits: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    refused_exits: tuple[str, ...] = ()
+    refused_exits: tuple[tuple[float, str], ...] = ()
 
     def settings(self) -> TwinSettings:
         """Return the estimator's settings: the file's, the scenario's product as the prior."""

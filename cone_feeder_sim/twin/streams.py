@@ -59,7 +59,7 @@ def mcap_detections(path: Path, topic: str | None = None) -> np.ndarray:
     recording, chosen = _recording(path, topic, DETECTION_TOPICS, 'sensor_msgs/msg/PointCloud2')
     rows = []
     for message in recording.messages({chosen}):
-        cloud = decode(message.type_name, message.data)
+        cloud = decode(message.type_name, message.data, strict=False)
         t = stamp_seconds(cloud['header']['stamp'])
         points = cloud_points(cloud)
         names = points.dtype.names or ()
@@ -78,7 +78,7 @@ def mcap_cone(path: Path, topic: str | None = None, joint: str = 'cone') -> np.n
     recording, chosen = _recording(path, topic, ('/cone_state',), 'sensor_msgs/msg/JointState')
     rows = []
     for message in recording.messages({chosen}):
-        state = decode(message.type_name, message.data)
+        state = decode(message.type_name, message.data, strict=False)
         if joint in state['name'] and len(state['velocity']) > state['name'].index(joint):
             rows.append([stamp_seconds(state['header']['stamp']),
                          float(state['velocity'][state['name'].index(joint)])])
@@ -86,25 +86,26 @@ def mcap_cone(path: Path, topic: str | None = None, joint: str = 'cone') -> np.n
     return table[np.argsort(table[:, 0], kind='stable')]
 
 
-def mcap_exits(path: Path, channels: int,
-               topic: str | None = None) -> tuple[np.ndarray, tuple[str, ...]]:
+def mcap_exits(path: Path, channels: int, topic: str | None = None) -> tuple[
+        np.ndarray, tuple[tuple[float, str], ...]]:
     """
-    Return the measured exits (e, 3), sorted by t, and why messages were refused.
+    Return the measured exits (e, 3), sorted by t, and the messages refused.
 
     Columns: t (s), channel (1-based), mass (kg; NaN: not weighed). channels: the layout's
     count. A message is checked as twin_node checks it (:func:`.frames.measured_exits`):
-    one with an exit that is not one is refused whole, its reason returned, so that a
-    node's recording run again takes the exits the node took.
+    one that does not decode, or with an exit that is not one, is refused whole, so that a
+    node's recording run again takes the exits the node took. Refused: (log time (s),
+    why) per message.
     """
     recording, chosen = _recording(path, topic, ('/exit_events',), 'sensor_msgs/msg/PointCloud2')
     rows: list[tuple[float, int, float]] = []
     refused = []
     for message in recording.messages({chosen}):
-        cloud = decode(message.type_name, message.data)
         try:
+            cloud = decode(message.type_name, message.data, strict=False)
             rows += measured_exits(stamp_seconds(cloud['header']['stamp']),
                                    cloud_points(cloud), channels)
-        except TwinError as exc:
-            refused.append(str(exc))
+        except (ConeFeederError, ValueError) as exc:
+            refused.append((message.log_time_ns / 1e9, str(exc)))
     table = np.array(rows, dtype=float).reshape(-1, 3)
     return table[np.argsort(table[:, 0], kind='stable')], tuple(refused)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from cone_feeder_sim.cli import main
 from cone_feeder_sim.errors import TwinError
+from cone_feeder_sim.formats.cdr import encode
 from cone_feeder_sim.formats.mcap_reader import open_recording
 from cone_feeder_sim.formats.mcap_writer import McapRecorder
 from cone_feeder_sim.formats.messages import cloud_message, cone_state_message, header
@@ -214,13 +215,26 @@ def test_measured_exits_are_read_from_a_recording_or_a_csv(tmp_path: Path) -> No
         for when, cloud in ((0.8, good), (0.9, points)):
             recorder.write('/exit_events', 'sensor_msgs/msg/PointCloud2',
                            cloud_message(header(when, 'feeder'), cloud), round(when * 1e9))
+        # a message that does not decode is refused whole too, in its turn (as the node
+        # refuses it on arrival); one with bytes past its payload (a DDS writer's padding)
+        # is read, as the node reads it
+        recorder.write_serialized('/exit_events', 'sensor_msgs/msg/PointCloud2',
+                                  b'\x00\x01\x00\x00\x05', round(0.85 * 1e9))
+        padded = encode('sensor_msgs/msg/PointCloud2', cloud_message(header(0.95, 'feeder'),
+                                                                     good)) + bytes(3)
+        recorder.write_serialized('/exit_events', 'sensor_msgs/msg/PointCloud2', padded,
+                                  round(0.95 * 1e9))
     (tmp_path / 'twin.yaml').write_text(yaml.safe_dump({**twin, 'exits': 'sensors.mcap'}))
     spec = load_twin(tmp_path / 'twin.yaml')
-    assert spec.exits.tolist() == [[float(event['t']), int(event['channel']), MODEL.product.m]]
+    assert spec.exits.tolist() == [[float(event['t']), int(event['channel']),
+                                    MODEL.product.m]] * 2
     logged.clear()
     run_twin(spec, tmp_path / 'mcap', logged.append)
-    assert logged == ['exits at t = 0.9000 s refused: a channel not in 1..14']
-    assert read(tmp_path / 'mcap' / 'frames.csv') == frames
+    assert len(logged) == 2 and logged[0].startswith('cannot decode sensor_msgs/msg/')
+    assert logged[1] == 'exits at t = 0.9000 s refused: a channel not in 1..14'
+    frames_mcap = read(tmp_path / 'mcap' / 'frames.csv')
+    assert sum(int(f['measured']) for f in frames_mcap) == 2  # the same exit twice
+    assert sum(int(f['explained']) for f in frames_mcap) == 1
 
 
 def test_a_camera_s_track_ids_are_read_from_a_recording(tmp_path: Path) -> None:
