@@ -437,8 +437,8 @@ class Twin:
         Advance every member to t1 (s); pieces that left in most members are dropped.
 
         Each confirmed piece dropped so is an exit the twin saw (:attr:`Frame.left`): the
-        members' median exit time (over this prediction and those before), the channel most
-        of them give, the piece's mass.
+        members' median exit time (over this prediction and those before: :meth:`_members_exit`),
+        the channel most of them give, the piece's mass.
         """
         m = len(self.states)
         smoother = self._smoother or []
@@ -473,12 +473,24 @@ class Twin:
         for i in dropped:
             if i not in seen:
                 continue
-            times, channels = zip(*seen[i])  # the median: members' exits can be far apart
-            when, channel = float(np.median(times)), int(np.bincount(channels).argmax())
-            self._recent_exits.append((when, channel))
+            when, channel = self._members_exit(i)
             if self.hits.get(i, 0) >= self.settings.confirm:
                 self._left.append(Exit(piece=i, t=when, channel=channel, mass=self.masses[i]))
         self._drop(dropped)
+
+    def _members_exit(self, i: int) -> tuple[float, int]:
+        """
+        Return the exit of piece i the members that let it go give: t (s), channel.
+
+        Their median time, one member's (the lower of the middle two: members' exits can be
+        a prediction apart, and a mean or a midpoint would be a time none gave), and the
+        channel most of them give; it joins the exits a measured one may match.
+        """
+        times, channels = zip(*self._leaving[i])
+        when = float(sorted(times)[(len(times) - 1) // 2])
+        channel = int(np.bincount(channels).argmax())
+        self._recent_exits.append((when, channel))
+        return when, channel
 
     def pieces(self, tentative: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """

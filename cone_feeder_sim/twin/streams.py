@@ -94,18 +94,20 @@ def mcap_exits(path: Path, channels: int, topic: str | None = None) -> tuple[
     Columns: t (s), channel (1-based), mass (kg; NaN: not weighed). channels: the layout's
     count. A message is checked as twin_node checks it (:func:`.frames.measured_exits`):
     one that does not decode, or with an exit that is not one, is refused whole, so that a
-    node's recording run again takes the exits the node took. Refused: (log time (s),
-    why) per message.
+    node's recording run again takes the exits the node took. Refused: (t (s), why) per
+    message, sorted: t its stamp, or its log time where it does not decode.
     """
     recording, chosen = _recording(path, topic, ('/exit_events',), 'sensor_msgs/msg/PointCloud2')
     rows: list[tuple[float, int, float]] = []
     refused = []
     for message in recording.messages({chosen}):
+        t = message.log_time_ns / 1e9
         try:
             cloud = decode(message.type_name, message.data, strict=False)
-            rows += measured_exits(stamp_seconds(cloud['header']['stamp']),
-                                   cloud_points(cloud), channels)
+            t = stamp_seconds(cloud['header']['stamp'])
+            rows += measured_exits(t, cloud_points(cloud), channels)
         except (ConeFeederError, ValueError) as exc:
-            refused.append((message.log_time_ns / 1e9, str(exc)))
+            refused.append((t, str(exc)))
     table = np.array(rows, dtype=float).reshape(-1, 3)
-    return table[np.argsort(table[:, 0], kind='stable')], tuple(refused)
+    return (table[np.argsort(table[:, 0], kind='stable')],
+            tuple(sorted(refused, key=lambda row: row[0])))
