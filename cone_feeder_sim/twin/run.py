@@ -22,9 +22,9 @@ measured speed held). A bad frame (a coordinate not finite, more than
 :data:`.frames.MAX_DETECTIONS` points, a stamp older than the twin, a mass no piece can
 have) is refused with one line and the twin goes on; so is a cone speed that is not
 finite, and a measured exit that is not in a channel of the layout or whose mass no piece
-can have (in a recording, a channel not in the layout or a mass that is not positive
-refuses its exits message whole, as twin_node refuses it: :func:`.streams.mcap_exits`).
-The output directory gets:
+can have. A recording's messages are decoded and checked as twin_node decodes and checks
+them (:mod:`.streams`): one the node would refuse is refused whole, its line logged when
+the stream reaches its stamp. The output directory gets:
 
 - ``channel_forecast.csv``: t, horizon, channel, mass, spread (s, s, -, kg, kg);
 - ``pieces.csv``: t, piece, x, y, channel (0: stays), probability, exit_time, track_id (s,
@@ -97,7 +97,7 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
     ends = list(starts[1:]) + [len(spec.detections)]
     cone = iter(spec.cone.tolist())
     pending = next(cone, None)
-    unfit = iter(spec.refused_exits)  # messages refused whole, as twin_node refuses them
+    unfit = iter(spec.refused)  # a recording's messages refused whole, as twin_node does
     bad = next(unfit, None)
     exits = iter(spec.exits.tolist())
     measured = next(exits, None)
@@ -118,7 +118,8 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
                     log(f'cone speed refused: {exc}')
                 pending = next(cone, None)
             while bad is not None and bad[0] <= t:
-                log(bad[1])
+                refused += bad[1] == 'frame'
+                log(bad[2])
                 bad = next(unfit, None)
             while measured is not None and measured[0] <= t:
                 try:
@@ -157,7 +158,8 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
                 while due <= t + 1e-9:
                     due += spec.every
     while bad is not None:  # after the last frame
-        log(bad[1])
+        refused += bad[1] == 'frame'
+        log(bad[2])
         bad = next(unfit, None)
     write_report(out)
     return TwinSummary(frames=frames, refused=refused, forecasts=forecasts, nis=nis,

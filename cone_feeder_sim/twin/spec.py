@@ -77,8 +77,9 @@ class TwinSpec:
     t (s), omega (rad/s), sorted; members, sigma (m), horizons (s), every (s), seed as in the file;
     tuning: the other estimator settings the file sets (:data:`TUNING`); exits: (e, 3) rows
     t (s), channel, mass (kg) (NaN: not given; checked when the twin takes them), sorted,
-    the measured exits (none without the key); refused_exits: (t (s), why) of each MCAP
-    exits message refused whole, as twin_node refuses it (:func:`.streams.mcap_exits`).
+    the measured exits (none without the key); refused: (t (s), what, why) of each MCAP
+    message refused whole, as twin_node refuses it (:mod:`.streams`), sorted by t; what:
+    'frame', 'cone' or 'exits'.
     """
 
     scenario: Scenario
@@ -91,7 +92,7 @@ class TwinSpec:
     seed: int = 0
     tuning: dict[str, float] = field(default_factory=dict)
     exits: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    refused_exits: tuple[tuple[float, str], ...] = ()
+    refused: tuple[tuple[float, str, str], ...] = ()
 
     def settings(self) -> TwinSettings:
         """Return the estimator's settings: the file's, the scenario's product as the prior."""
@@ -164,17 +165,21 @@ def load_twin(path: str | Path) -> TwinSpec:
         if content.get(key) is not None and not isinstance(content[key], str):
             raise TwinError(f'{key} must name a topic, got {content[key]!r}')
     found, speeds = base / content['detections'], base / content['cone']
-    detections = (mcap_detections(found, content.get('detections_topic'))
-                  if found.suffix == '.mcap'
-                  else _rows(found, ('t', 'x', 'y'), ('mass', 'track_id')))
-    cone = (mcap_cone(speeds, content.get('cone_topic')) if speeds.suffix == '.mcap'
-            else _rows(speeds, ('t', 'omega'), ()))
-    exits, refused = np.zeros((0, 3)), ()
+    refused: dict[str, tuple] = {}
+    if found.suffix == '.mcap':
+        detections, refused['frame'] = mcap_detections(found, content.get('detections_topic'))
+    else:
+        detections = _rows(found, ('t', 'x', 'y'), ('mass', 'track_id'))
+    if speeds.suffix == '.mcap':
+        cone, refused['cone'] = mcap_cone(speeds, content.get('cone_topic'))
+    else:
+        cone = _rows(speeds, ('t', 'omega'), ())
+    exits = np.zeros((0, 3))
     if 'exits' in content:
         measured = base / content['exits']
         if measured.suffix == '.mcap':
-            exits, refused = mcap_exits(measured, scenario.model.channels.count,
-                                        content.get('exits_topic'))
+            exits, refused['exits'] = mcap_exits(measured, scenario.model.channels.count,
+                                                 content.get('exits_topic'))
         else:
             exits = _rows(measured, ('t', 'channel'), ('mass',))
     horizons = content.get('horizons', [0.5, 1.0, 2.0])
@@ -184,7 +189,8 @@ def load_twin(path: str | Path) -> TwinSpec:
         raise TwinError(f'horizons must be a list of numbers in (0, 60] s, got {horizons!r}')
     return TwinSpec(
         scenario=scenario, detections=detections, cone=cone, exits=exits,
-        refused_exits=refused,
+        refused=tuple(sorted(((t, what, line) for what, rows in refused.items()
+                             for t, line in rows), key=lambda row: row[0])),
         members=_number(content, 'members', TwinSettings.members, 2, integer=True),
         sigma=float(_number(content, 'sigma', 0.002, 1e-6)),
         horizons=tuple(sorted(float(h) for h in horizons)),

@@ -20,14 +20,19 @@ frame at its header's stamp (fields x, y and optionally mass), each JointState m
 the cone topic one speed of the joint ``cone``, each PointCloud2 message of the exits topic
 the exits measured in it (fields channel and optionally exit_time, else at the header's
 stamp, and mass, a load cell's step). Topics default to ``/detections`` (else
-``/particle_states``, what sim_node records), ``/cone_state`` and ``/exit_events``.
+``/particle_states``, what sim_node records), ``/cone_state`` and ``/exit_events``. Each
+message is decoded and checked as twin_node decodes and checks it, and one it would refuse
+is refused whole, its line kept for the run's log: a node's recording run again takes what
+the node took.
 """
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from .frames import measured_exits
+from .frames import cone_speed, detection_frame, measured_exits
 from ..errors import ConeFeederError, TwinError
 from ..formats.cdr import decode
 from ..formats.mcap_reader import open_recording
@@ -54,60 +59,80 @@ def _recording(path: Path, topic: str | None, defaults: tuple[str, ...], type_na
     return recording, chosen
 
 
-def mcap_detections(path: Path, topic: str | None = None) -> np.ndarray:
-    """Return the detections (k, 5): t (s), x, y (m), mass (kg), track_id (NaN: not given)."""
-    recording, chosen = _recording(path, topic, DETECTION_TOPICS, 'sensor_msgs/msg/PointCloud2')
-    rows = []
-    for message in recording.messages({chosen}):
-        cloud = decode(message.type_name, message.data, strict=False)
-        t = stamp_seconds(cloud['header']['stamp'])
-        points = cloud_points(cloud)
-        names = points.dtype.names or ()
-        if 'x' not in names or 'y' not in names:
-            raise TwinError(f'{path}, {chosen}: a cloud without x and y fields')
-        mass, track = (np.asarray(points[name], dtype=float) if name in names
-                       else np.full(len(points), np.nan) for name in ('mass', 'track_id'))
-        rows.append(np.column_stack([np.full(len(points), t), points['x'], points['y'], mass,
-                                     track]))
-    table = np.concatenate(rows) if rows else np.zeros((0, 5))
-    return table[np.argsort(table[:, 0], kind='stable')]
-
-
-def mcap_cone(path: Path, topic: str | None = None, joint: str = 'cone') -> np.ndarray:
-    """Return the cone's measured speeds (j, 2): t (s), omega (rad/s), sorted."""
-    recording, chosen = _recording(path, topic, ('/cone_state',), 'sensor_msgs/msg/JointState')
-    rows = []
-    for message in recording.messages({chosen}):
-        state = decode(message.type_name, message.data, strict=False)
-        if joint in state['name'] and len(state['velocity']) > state['name'].index(joint):
-            rows.append([stamp_seconds(state['header']['stamp']),
-                         float(state['velocity'][state['name'].index(joint)])])
-    table = np.array(rows, dtype=float).reshape(-1, 2)
-    return table[np.argsort(table[:, 0], kind='stable')]
-
-
-def mcap_exits(path: Path, channels: int, topic: str | None = None) -> tuple[
-        np.ndarray, tuple[tuple[float, str], ...]]:
+def _checked(recording: Any, chosen: str, what: str,
+             rows_of: Callable[[float, dict[str, Any]], list]) -> tuple[list, tuple]:
     """
-    Return the measured exits (e, 3), sorted by t, and the messages refused.
+    Return rows_of(stamp (s), message) over a topic's messages, and those refused.
 
-    Columns: t (s), channel (1-based), mass (kg; NaN: not weighed). channels: the layout's
-    count. A message is checked as twin_node checks it (:func:`.frames.measured_exits`):
-    one that does not decode, or with an exit that is not one, is refused whole, so that a
-    node's recording run again takes the exits the node took. Refused: (t (s), why) per
-    message, sorted: t its stamp, or its log time where it does not decode.
+    A message that does not decode, or that rows_of refuses (TwinError: a check of
+    twin_node's, its line), is refused whole: (t (s), why) each, sorted by t, t its stamp
+    or, where it does not decode, its log time; what names it in the line.
     """
-    recording, chosen = _recording(path, topic, ('/exit_events',), 'sensor_msgs/msg/PointCloud2')
-    rows: list[tuple[float, int, float]] = []
+    rows: list = []
     refused = []
     for message in recording.messages({chosen}):
         t = message.log_time_ns / 1e9
         try:
-            cloud = decode(message.type_name, message.data, strict=False)
-            t = stamp_seconds(cloud['header']['stamp'])
-            rows += measured_exits(t, cloud_points(cloud), channels)
-        except (ConeFeederError, ValueError) as exc:
+            decoded = decode(message.type_name, message.data, strict=False)
+            t = stamp_seconds(decoded['header']['stamp'])
+            rows += rows_of(t, decoded)
+        except TwinError as exc:
             refused.append((t, str(exc)))
+        except (ConeFeederError, ValueError) as exc:
+            refused.append((t, f'{what} at t = {t:.4f} s refused: {exc}'))
+    return rows, tuple(sorted(refused, key=lambda row: row[0]))
+
+
+def mcap_detections(path: Path, topic: str | None = None) -> tuple[np.ndarray, tuple]:
+    """
+    Return the detections (k, 5), sorted by t, and the messages refused (see _checked).
+
+    Columns: t (s), x, y (m), mass (kg), track_id (NaN: not given). Each message is checked
+    as twin_node checks a frame (:func:`.frames.detection_frame`: x and y fields, at most
+    MAX_DETECTIONS points, finite values), its frame_id aside (a twin file names none).
+    """
+    recording, chosen = _recording(path, topic, DETECTION_TOPICS, 'sensor_msgs/msg/PointCloud2')
+
+    def rows_of(t: float, cloud: dict[str, Any]) -> list:
+        points = cloud_points(cloud)
+        detection_frame(t, points)
+        names = points.dtype.names or ()
+        mass, track = (np.asarray(points[name], dtype=float) if name in names
+                       else np.full(len(points), np.nan) for name in ('mass', 'track_id'))
+        return [np.column_stack([np.full(len(points), t), points['x'], points['y'], mass,
+                                 track])]
+
+    rows, refused = _checked(recording, chosen, 'frame', rows_of)
+    table = np.concatenate(rows) if rows else np.zeros((0, 5))
+    return table[np.argsort(table[:, 0], kind='stable')], refused
+
+
+def mcap_cone(path: Path, topic: str | None = None,
+              joint: str = 'cone') -> tuple[np.ndarray, tuple]:
+    """
+    Return the cone's measured speeds (j, 2): t (s), omega (rad/s), sorted, and refusals.
+
+    A message without the joint, or without a finite velocity of it, is refused, as
+    twin_node refuses it (:func:`.frames.cone_speed`; see _checked).
+    """
+    recording, chosen = _recording(path, topic, ('/cone_state',), 'sensor_msgs/msg/JointState')
+    rows, refused = _checked(recording, chosen, 'cone speed', lambda t, state: [
+        [t, cone_speed(t, list(state['name']), list(state['velocity']), joint)]])
+    table = np.array(rows, dtype=float).reshape(-1, 2)
+    return table[np.argsort(table[:, 0], kind='stable')], refused
+
+
+def mcap_exits(path: Path, channels: int, topic: str | None = None) -> tuple[np.ndarray, tuple]:
+    """
+    Return the measured exits (e, 3), sorted by t, and the messages refused (see _checked).
+
+    Columns: t (s), channel (1-based), mass (kg; NaN: not weighed). channels: the layout's
+    count. A message is checked as twin_node checks it (:func:`.frames.measured_exits`):
+    one with an exit that is not one is refused whole, so that a node's recording run
+    again takes the exits the node took.
+    """
+    recording, chosen = _recording(path, topic, ('/exit_events',), 'sensor_msgs/msg/PointCloud2')
+    rows, refused = _checked(recording, chosen, 'exits', lambda t, cloud: measured_exits(
+        t, cloud_points(cloud), channels))
     table = np.array(rows, dtype=float).reshape(-1, 3)
-    return (table[np.argsort(table[:, 0], kind='stable')],
-            tuple(sorted(refused, key=lambda row: row[0])))
+    return table[np.argsort(table[:, 0], kind='stable')], refused

@@ -29,7 +29,7 @@ from cone_feeder_sim.physics.simulation import (
     add_particles, advance, resting_height, SimParams, SimState, world_from_cone)
 from cone_feeder_sim.twin.association import GATE_CHI2
 from cone_feeder_sim.twin.run import FILES, run_twin
-from cone_feeder_sim.twin.spec import load_twin
+from cone_feeder_sim.twin.spec import load_twin, TwinSpec
 import numpy as np
 import pytest
 import yaml
@@ -230,11 +230,53 @@ def test_measured_exits_are_read_from_a_recording_or_a_csv(tmp_path: Path) -> No
                                     MODEL.product.m]] * 2
     logged.clear()
     run_twin(spec, tmp_path / 'mcap', logged.append)
-    assert len(logged) == 2 and logged[0].startswith('cannot decode sensor_msgs/msg/')
+    assert len(logged) == 2 and logged[0].startswith(
+        'exits at t = 0.8500 s refused: cannot decode sensor_msgs/msg/')
     assert logged[1] == 'exits at t = 0.9000 s refused: a channel not in 1..14'
     frames_mcap = read(tmp_path / 'mcap' / 'frames.csv')
     assert sum(int(f['measured']) for f in frames_mcap) == 2  # the same exit twice
     assert sum(int(f['explained']) for f in frames_mcap) == 1
+
+
+def camera_twin(folder: Path) -> TwinSpec:
+    """Return the twin file of folder's camera.mcap (detections and cone speeds) on one piece."""
+    (folder / 'scenario.yaml').write_text(yaml.safe_dump(
+        {'duration': 1.0, 'rotation': ROTATION,
+         'particles': [{'position': [0.1, 0.0, 0.0], 'on_surface': True}]}))
+    (folder / 'twin.yaml').write_text(yaml.safe_dump(
+        {'scenario': 'scenario.yaml', 'detections': 'camera.mcap', 'cone': 'camera.mcap'}))
+    return load_twin(folder / 'twin.yaml')
+
+
+def test_a_recording_s_bad_messages_are_refused_each_in_its_turn(tmp_path: Path) -> None:
+    # as twin_node refuses them: a cloud without y, a message that does not decode, a cone
+    # speed of another joint; the other frames are taken and the run goes on
+    points = np.zeros(2, dtype=DETECTION_DTYPE)
+    points['x'], points['y'] = [0.1, -0.08], [0.02, 0.09]
+    no_y = np.zeros(2, dtype=[('x', '<f4'), ('z', '<f4')])
+    with McapRecorder(tmp_path / 'camera.mcap') as recorder:
+        for k in range(1, 7):
+            ns = round(k / 30.0 * 1e9)
+            if k == 3:
+                recorder.write_serialized('/detections', 'sensor_msgs/msg/PointCloud2',
+                                          b'\x00\x01\x00\x00\x05', ns)
+            else:
+                recorder.write('/detections', 'sensor_msgs/msg/PointCloud2', cloud_message(
+                    header(k / 30.0, 'feeder'), no_y if k == 5 else points), ns)
+            state = cone_state_message(header(k / 30.0, 'feeder'), 0.0, 0.0)
+            if k == 4:
+                state['name'] = ['belt']
+            recorder.write('/cone_state', 'sensor_msgs/msg/JointState', state, ns)
+    spec = camera_twin(tmp_path)
+    assert len(spec.detections) == 2 * 4 and len(spec.cone) == 5
+    logged: list[str] = []
+    summary = run_twin(spec, tmp_path / 'out', logged.append)
+    assert (summary.frames, summary.refused) == (4, 2)
+    assert len(logged) == 3
+    assert logged[0].startswith('frame at t = 0.1000 s refused: cannot decode sensor_msgs/msg/')
+    assert logged[1] == "cone speed at t = 0.1333 s refused: no joint 'cone' (joints: 'belt')"
+    assert logged[2] == 'frame at t = 0.1667 s refused: no x and y fields (it has x, z)'
+    assert len(read(tmp_path / 'out' / 'frames.csv')) == 4
 
 
 def test_a_camera_s_track_ids_are_read_from_a_recording(tmp_path: Path) -> None:
@@ -249,12 +291,7 @@ def test_a_camera_s_track_ids_are_read_from_a_recording(tmp_path: Path) -> None:
                            cloud_message(header(k / 30.0, 'feeder'), points), ns)
             recorder.write('/cone_state', 'sensor_msgs/msg/JointState',
                            cone_state_message(header(k / 30.0, 'feeder'), 0.0, 0.0), ns)
-    (tmp_path / 'scenario.yaml').write_text(yaml.safe_dump(
-        {'duration': 1.0, 'rotation': ROTATION,
-         'particles': [{'position': [0.1, 0.0, 0.0], 'on_surface': True}]}))
-    (tmp_path / 'twin.yaml').write_text(yaml.safe_dump(
-        {'scenario': 'scenario.yaml', 'detections': 'camera.mcap', 'cone': 'camera.mcap'}))
-    spec = load_twin(tmp_path / 'twin.yaml')
+    spec = camera_twin(tmp_path)
     assert spec.detections[:, 4].tolist() == [40, NO_TRACK, 42] * 6
     assert np.isnan(spec.detections[:, 3]).all()  # no mass field: not given
     run_twin(spec, tmp_path / 'out')
