@@ -243,10 +243,10 @@ class TwinNode(GuardedNode):
 
     def _on_cone_state(self, data: bytes, info: Any) -> None:
         """Take the measured cone speed: frames that waited for it go on; open loop."""
-        msg, t = self._received('cone_state', data)
         arrival = _arrival(info)
         before = self._follower.outlook
         try:
+            msg, t = self._received('cone_state', data)  # one that does not decode: refused
             not_ahead('cone speed', t, self._latest(arrival))
             omega = cone_speed(t, list(msg['name']), [float(v) for v in msg['velocity']])
             taken = self._follower.cone_speed(t, omega)

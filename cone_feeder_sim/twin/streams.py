@@ -59,14 +59,14 @@ def _recording(path: Path, topic: str | None, defaults: tuple[str, ...], type_na
     return recording, chosen
 
 
-def _checked(recording: Any, chosen: str, what: str,
+def _checked(recording: Any, chosen: str,
              rows_of: Callable[[float, dict[str, Any]], list]) -> tuple[list, tuple]:
     """
     Return rows_of(stamp (s), message) over a topic's messages, and those refused.
 
     A message that does not decode, or that rows_of refuses (TwinError: a check of
-    twin_node's, its line), is refused whole: (t (s), why) each, sorted by t, t its stamp
-    or, where it does not decode, its log time; what names it in the line.
+    twin_node's), is refused whole: (t (s), why) each, sorted by t, t its stamp or, where
+    it does not decode, its log time, why the line twin_node logs.
     """
     rows: list = []
     refused = []
@@ -76,10 +76,8 @@ def _checked(recording: Any, chosen: str, what: str,
             decoded = decode(message.type_name, message.data, strict=False)
             t = stamp_seconds(decoded['header']['stamp'])
             rows += rows_of(t, decoded)
-        except TwinError as exc:
+        except (ConeFeederError, ValueError) as exc:  # the node's line, as it logs it
             refused.append((t, str(exc)))
-        except (ConeFeederError, ValueError) as exc:
-            refused.append((t, f'{what} at t = {t:.4f} s refused: {exc}'))
     return rows, tuple(sorted(refused, key=lambda row: row[0]))
 
 
@@ -102,7 +100,7 @@ def mcap_detections(path: Path, topic: str | None = None) -> tuple[np.ndarray, t
         return [np.column_stack([np.full(len(points), t), points['x'], points['y'], mass,
                                  track])]
 
-    rows, refused = _checked(recording, chosen, 'frame', rows_of)
+    rows, refused = _checked(recording, chosen, rows_of)
     table = np.concatenate(rows) if rows else np.zeros((0, 5))
     return table[np.argsort(table[:, 0], kind='stable')], refused
 
@@ -116,7 +114,7 @@ def mcap_cone(path: Path, topic: str | None = None,
     twin_node refuses it (:func:`.frames.cone_speed`; see _checked).
     """
     recording, chosen = _recording(path, topic, ('/cone_state',), 'sensor_msgs/msg/JointState')
-    rows, refused = _checked(recording, chosen, 'cone speed', lambda t, state: [
+    rows, refused = _checked(recording, chosen, lambda t, state: [
         [t, cone_speed(t, list(state['name']), list(state['velocity']), joint)]])
     table = np.array(rows, dtype=float).reshape(-1, 2)
     return table[np.argsort(table[:, 0], kind='stable')], refused
@@ -132,7 +130,7 @@ def mcap_exits(path: Path, channels: int, topic: str | None = None) -> tuple[np.
     again takes the exits the node took.
     """
     recording, chosen = _recording(path, topic, ('/exit_events',), 'sensor_msgs/msg/PointCloud2')
-    rows, refused = _checked(recording, chosen, 'exits', lambda t, cloud: measured_exits(
+    rows, refused = _checked(recording, chosen, lambda t, cloud: measured_exits(
         t, cloud_points(cloud), channels))
     table = np.array(rows, dtype=float).reshape(-1, 3)
     return table[np.argsort(table[:, 0], kind='stable')], refused

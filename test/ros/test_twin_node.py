@@ -219,11 +219,12 @@ def test_bad_inputs_are_refused_and_the_twin_goes_on(context: Any, tmp_path: Pat
         plant.cone.publish(CODEC.encode('sensor_msgs/msg/JointState', {
             'header': header(0.2, 'feeder'), 'name': ['belt'], 'position': np.zeros(1),
             'velocity': np.zeros(1), 'effort': np.zeros(0)}))
+        plant.cone.publish(b'\x00\x01\x00\x00\x05')  # does not decode: refused, not fatal
         exits = np.zeros(2, dtype=EXIT_DTYPE)
         exits['exit_time'], exits['channel'] = [0.15, 0.16], [3, 15]
         plant.exits.publish(CODEC.encode('sensor_msgs/msg/PointCloud2',
                                          cloud_message(header(0.17, 'feeder'), exits)))
-        assert plant.spin_until(lambda: len(logged) >= 6)
+        assert plant.spin_until(lambda: len(logged) >= 7)
         assert any('a channel not in 1..14' in line for line in logged)
         # good ones (the twin waits to take them), and one older than its history: refused
         # alone
@@ -241,6 +242,7 @@ def test_bad_inputs_are_refused_and_the_twin_goes_on(context: Any, tmp_path: Pat
         assert any('from the future' in line for line in logged)
         assert any('10001 detections' in line for line in logged)
         assert any("no joint 'cone'" in line for line in logged)
+        assert any(line.startswith('cannot decode sensor_msgs/msg/JointState') for line in logged)
         count = len(plant.received['pieces'])
         plant.frame(6 / 30.0)
         assert plant.spin_until(lambda: len(plant.received['pieces']) > count)
