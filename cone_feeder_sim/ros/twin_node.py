@@ -312,7 +312,8 @@ class TwinNode(GuardedNode):
         ns = round(t * 1e9)
         head = header(t, self._frame_id)
         ids, mean, covariance = twin.pieces()
-        masses = np.array([twin.masses[int(i)] for i in ids], dtype=float)
+        by_piece = twin.masses
+        masses = np.array([by_piece[int(i)] for i in ids], dtype=float)
         outlook = self._follower.outlook
         self._outputs.publish(self._pub['twin/pieces'], pieces_message(
             head, self._model, ids, mean, covariance, masses, outlook, twin.tracks), ns)

@@ -316,11 +316,8 @@ class Twin:
         self.states = [SimState(t=t0) for _ in range(m)]
         self.times, self.omegas = [t0], [0.0]
         self._profile = RotationProfile(np.array(self.times), np.array(self.omegas))
-        #: each piece's mass (kg) as the forecasts count it: the camera's, or for the pieces
-        #: in _mean_mass the mean piece mass (:attr:`piece_mass`), which follows the load
-        #: cells' weighed exits; the members integrate each with the mass it was born with
-        self.masses: dict[int, float] = {}
-        self._mean_mass: set[int] = set()
+        #: each piece's camera mass (kg; NaN: none, the mean piece mass: :attr:`masses`)
+        self._camera_mass: dict[int, float] = {}
         self.last_seen: dict[int, float] = {}
         #: the frames each piece was seen in, up to settings.confirm (confirmed there)
         self.hits: dict[int, int] = {}
@@ -372,8 +369,7 @@ class Twin:
         other.log_d, other.mu_c = self.log_d.copy(), self.mu_c.copy()
         other.rng = copy.deepcopy(self.rng)
         other.times, other.omegas = list(self.times), list(self.omegas)
-        other.masses, other.last_seen = dict(self.masses), dict(self.last_seen)
-        other._mean_mass = set(self._mean_mass)
+        other._camera_mass, other.last_seen = dict(self._camera_mass), dict(self.last_seen)
         other.hits, other.tracks = dict(self.hits), dict(self.tracks)
         other._exits, other._left = list(self._exits), list(self._left)
         other._recent_exits = list(self._recent_exits)
@@ -437,8 +433,8 @@ class Twin:
         Advance every member to t1 (s); pieces that left in most members are dropped.
 
         Each confirmed piece dropped so is an exit the twin saw (:attr:`Frame.left`): the
-        members' median exit time (over this prediction and those before: :meth:`_members_exit`),
-        the channel most of them give, the piece's mass.
+        members' median exit time (over this prediction and those before), the channel
+        most of them give, the piece's mass.
         """
         m = len(self.states)
         smoother = self._smoother or []
@@ -473,24 +469,15 @@ class Twin:
         for i in dropped:
             if i not in seen:
                 continue
-            when, channel = self._members_exit(i)
+            # the lower median: one member's time (members' exits can be a prediction
+            # apart, and a mean or a midpoint of two would be a time none gave)
+            times, channels = zip(*seen[i])
+            when = float(sorted(times)[(len(times) - 1) // 2])
+            channel = int(np.bincount(channels).argmax())
+            self._recent_exits.append((when, channel))
             if self.hits.get(i, 0) >= self.settings.confirm:
-                self._left.append(Exit(piece=i, t=when, channel=channel, mass=self.masses[i]))
+                self._left.append(Exit(piece=i, t=when, channel=channel, mass=self._mass(i)))
         self._drop(dropped)
-
-    def _members_exit(self, i: int) -> tuple[float, int]:
-        """
-        Return the exit of piece i the members that let it go give: t (s), channel.
-
-        Their median time, one member's (the lower of the middle two: members' exits can be
-        a prediction apart, and a mean or a midpoint would be a time none gave), and the
-        channel most of them give; it joins the exits a measured one may match.
-        """
-        times, channels = zip(*self._leaving[i])
-        when = float(sorted(times)[(len(times) - 1) // 2])
-        channel = int(np.bincount(channels).argmax())
-        self._recent_exits.append((when, channel))
-        return when, channel
 
     def pieces(self, tentative: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
@@ -516,6 +503,27 @@ class Twin:
         d = np.exp(self.log_d)
         return {'d': (float(d.mean()), float(d.std(ddof=1))),
                 'mu_C': (float(self.mu_c.mean()), float(self.mu_c.std(ddof=1)))}
+
+    @property
+    def masses(self) -> dict[int, float]:
+        """
+        Return each piece's mass (kg) as the forecasts count it: the camera's, else the mean.
+
+        The mean piece mass (:attr:`piece_mass`) follows the load cells' weighed exits, for
+        the pieces on the cone as for those to come; the members integrate each piece with
+        the mass it was born with.
+        """
+        return {i: self._mass(i) for i in self._camera_mass}
+
+    def _mass(self, i: int) -> float:
+        """Return piece i's mass (kg): see :attr:`masses`."""
+        mass = self._camera_mass[i]
+        return self.piece_mass if math.isnan(mass) else mass
+
+    @property
+    def _mean_mass(self) -> set[int]:
+        """Return the pieces without a camera's mass (they have :attr:`piece_mass`)."""
+        return {i for i, m in self._camera_mass.items() if math.isnan(m)}
 
     @property
     def piece_mass(self) -> float:
@@ -642,9 +650,9 @@ class Twin:
         # every piece the twin knows, not only those every member holds: one that some
         # members let go is in no output and no association, and dies unseen
         dead = [i for i in self.last_seen
-                if t - self.last_seen.get(i, t) > (settings.death_after
-                                                   if self.hits.get(i, 0) >= confirm
-                                                   else settings.tentative_after)]
+                if t - self.last_seen[i] > (settings.death_after
+                                            if self.hits.get(i, 0) >= confirm
+                                            else settings.tentative_after)]
         self._drop(dead)
         dead += self._merge(t)
         if self.settings.window > 0.0 and t - self._window_t0 >= self.settings.window - 1e-9:
@@ -685,7 +693,6 @@ class Twin:
         if weighed:
             count, total = self._weighed
             self._weighed = (count + len(weighed), total + math.fsum(weighed))
-            self._follow_piece_mass()
         explained = 0
         layout, radius = self.params.model.channels, self.params.model.r
         taken: list[int] = []
@@ -721,7 +728,7 @@ class Twin:
             taken.append(i)
             if self.hits.get(i, 0) >= self.settings.confirm:
                 left.append(Exit(piece=i, t=float(when), channel=channel,
-                                 mass=self.masses[i] if math.isnan(mass) else mass))
+                                 mass=self._mass(i) if math.isnan(mass) else mass))
             explained += 1
         self._drop(taken)
         # the exits still to come are after t - EXIT_LAG: none can match an older one of
@@ -1011,17 +1018,11 @@ class Twin:
             return state
         # one row, each piece's mass in its column (no other column depends on the mass):
         # a row per piece would cost 30 us each, with masses from load cells all differing;
-        # each piece keeps the mass it was born with (see _follow_piece_mass)
+        # each piece keeps the mass it was born with (see masses)
         row = product_row(self._product(member, self.params.model.product.m, parameters))
         products = np.repeat(row[None, :], state.count, axis=0)
         products[:, P_M] = state.products[:, P_M]
         return replace(state, products=products)
-
-    def _follow_piece_mass(self) -> None:
-        """Give the pieces without a camera's mass the mean piece mass, as :attr:`masses` says."""
-        mean = self.piece_mass
-        for i in self._mean_mass:
-            self.masses[i] = mean
 
     def _birth(self, xy: np.ndarray, masses: np.ndarray | None, t: float) -> None:
         model = self.params.model
@@ -1041,9 +1042,7 @@ class Twin:
         self.states = grown
         for k, i in enumerate(ids.tolist()):
             assert i == first + k  # every member numbers its pieces alike
-            self.masses[i] = weights[k]
-            if not camera[k]:
-                self._mean_mass.add(i)
+            self._camera_mass[i] = weights[k] if camera[k] else math.nan
             self.last_seen[i] = t
             self.hits[i] = 1
 
@@ -1052,8 +1051,7 @@ class Twin:
             self.states = [remove_particles(s, ids) for s in self.states]
         for i in ids:
             self._leaving.pop(i, None)
-            self.masses.pop(i, None)
-            self._mean_mass.discard(i)
+            self._camera_mass.pop(i, None)
             self.last_seen.pop(i, None)
             self.hits.pop(i, None)
             self.tracks.pop(i, None)

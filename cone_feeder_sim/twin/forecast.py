@@ -104,12 +104,13 @@ def forecast(twin: Twin, horizons: tuple[float, ...] = (0.5, 1.0, 2.0),
     times = np.zeros(len(ids))
     left = np.zeros(len(ids))
     mass = np.zeros((m, len(h), channels))
+    masses = twin.masses
     for member, exits in ((k, e) for k, parts in enumerate(outcomes) for e in parts):
         for i, t, c in zip(exits.ids.tolist(), exits.t.tolist(), exits.channel.tolist()):
             k = index.get(i)
             if k is None:  # a tentative piece (twin.pieces): not counted until confirmed
                 continue
-            mass[member, :, c - 1] += twin.masses[i] * (t <= t0 + h)
+            mass[member, :, c - 1] += masses[i] * (t <= t0 + h)
             counts[k, c] += 1
             times[k] += t
             left[k] += 1

@@ -28,7 +28,7 @@ from ..errors import TwinError
 from ..formats.pointcloud import NO_TRACK
 
 __all__ = ['cone_speed', 'DetectionFrame', 'detection_frame', 'MAX_DETECTIONS',
-           'exit_columns', 'MAX_FUTURE', 'measured_exits', 'not_ahead']
+           'MAX_FUTURE', 'measured_exits', 'not_ahead']
 
 #: The most detections a frame may hold; a larger frame is refused.
 MAX_DETECTIONS = 10_000
@@ -141,7 +141,11 @@ def measured_exits(t: float, points: np.ndarray,
     if len(points) > MAX_DETECTIONS:
         raise TwinError(f'exits at t = {t:.4f} s refused: {len(points)} exits, more than '
                         f'{MAX_DETECTIONS}')
-    times, channel, mass = exit_columns(t, points)
+    times = (np.asarray(points['exit_time'], dtype=float) if 'exit_time' in names
+             else np.full(len(points), float(t)))
+    channel = np.asarray(points['channel'], dtype=float)
+    mass = (np.asarray(points['mass'], dtype=float) if 'mass' in names
+            else np.full(len(points), np.nan))
     if not (np.isfinite(times).all() and np.isfinite(t)):
         raise TwinError(f'exits at t = {t:.4f} s refused: a time that is not finite')
     if not np.all((channel == np.floor(channel)) & (channel >= 1) & (channel <= channels)):
@@ -151,21 +155,6 @@ def measured_exits(t: float, points: np.ndarray,
         raise TwinError(f'exits at t = {t:.4f} s refused: a mass that is not a positive '
                         f'number (kg; NaN: not weighed)')
     return sorted(zip(times.tolist(), channel.astype(int).tolist(), mass.tolist()))
-
-
-def exit_columns(t: float, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """
-    Return an exits message's times (e,) (s: exit_time, else the stamp t), channels, masses.
-
-    channels (e,) float: the channel field, NaN where there is none; masses (e,) kg: the
-    mass field, NaN where there is none (unchecked: see :func:`measured_exits`).
-    """
-    names = points.dtype.names or ()
-    times = (np.asarray(points['exit_time'], dtype=float) if 'exit_time' in names
-             else np.full(len(points), float(t)))
-    channels, masses = (np.asarray(points[name], dtype=float) if name in names
-                        else np.full(len(points), np.nan) for name in ('channel', 'mass'))
-    return times, channels, masses
 
 
 def cone_speed(t: float, names: list[str], velocities: list[float],

@@ -41,10 +41,12 @@ the stream reaches its stamp. The output directory gets:
   the parameters' traces, the consistency test over time.
 """
 
+from collections import deque
 from collections.abc import Callable
 import contextlib
 import csv
 from dataclasses import dataclass
+import math
 from pathlib import Path
 
 import numpy as np
@@ -97,11 +99,16 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
     ends = list(starts[1:]) + [len(spec.detections)]
     cone = iter(spec.cone.tolist())
     pending = next(cone, None)
-    unfit = iter(spec.refused)  # a recording's messages refused whole, as twin_node does
-    bad = next(unfit, None)
+    unfit = deque(spec.refused)  # a recording's messages refused whole, as twin_node does
+
+    def log_refused(until: float) -> None:
+        while unfit and unfit[0][0] <= until:
+            log(unfit.popleft()[2])
+
     exits = iter(spec.exits.tolist())
     measured = next(exits, None)
-    frames = refused = forecasts = observed = 0
+    frames = forecasts = observed = 0
+    refused = sum(what == 'frame' for _, what, _ in spec.refused)
     nis = 0.0
     due = stamps[0] if len(stamps) else 0.0
     with contextlib.ExitStack() as stack:
@@ -117,10 +124,7 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
                 except ValueError as exc:
                     log(f'cone speed refused: {exc}')
                 pending = next(cone, None)
-            while bad is not None and bad[0] <= t:
-                refused += bad[1] == 'frame'
-                log(bad[2])
-                bad = next(unfit, None)
+            log_refused(t)
             while measured is not None and measured[0] <= t:
                 try:
                     when, channel, mass = measured
@@ -157,10 +161,7 @@ def run_twin(spec: TwinSpec, out: Path, log: Callable[[str], None] = lambda line
                 forecasts += 1
                 while due <= t + 1e-9:
                     due += spec.every
-    while bad is not None:  # after the last frame
-        refused += bad[1] == 'frame'
-        log(bad[2])
-        bad = next(unfit, None)
+    log_refused(math.inf)  # after the last frame
     write_report(out)
     return TwinSummary(frames=frames, refused=refused, forecasts=forecasts, nis=nis,
                        observed=observed)

@@ -165,7 +165,7 @@ def load_twin(path: str | Path) -> TwinSpec:
         if content.get(key) is not None and not isinstance(content[key], str):
             raise TwinError(f'{key} must name a topic, got {content[key]!r}')
     found, speeds = base / content['detections'], base / content['cone']
-    refused: dict[str, tuple] = {}
+    refused: dict[str, list] = {}
     if found.suffix == '.mcap':
         detections, refused['frame'] = mcap_detections(found, content.get('detections_topic'))
     else:

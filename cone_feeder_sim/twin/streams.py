@@ -59,29 +59,31 @@ def _recording(path: Path, topic: str | None, defaults: tuple[str, ...], type_na
     return recording, chosen
 
 
-def _checked(recording: Any, chosen: str,
-             rows_of: Callable[[float, dict[str, Any]], list]) -> tuple[list, tuple]:
+def _checked(recording: Any, chosen: str, width: int,
+             rows_of: Callable[[float, dict[str, Any]], Any]) -> tuple[np.ndarray, list]:
     """
-    Return rows_of(stamp (s), message) over a topic's messages, and those refused.
+    Return rows_of(stamp (s), message) over a topic's messages, sorted by t, and the refused.
 
-    A message that does not decode, or that rows_of refuses (TwinError: a check of
-    twin_node's), is refused whole: (t (s), why) each, sorted by t, t its stamp or, where
-    it does not decode, its log time, why the line twin_node logs.
+    rows_of gives a message's rows (of width columns, the first t). A message that does not
+    decode, or that rows_of refuses (TwinError: a check of twin_node's), is refused whole:
+    (t (s), why) each, t its stamp or, where it does not decode, its log time, why the line
+    twin_node logs.
     """
-    rows: list = []
+    rows = [np.zeros((0, width))]
     refused = []
     for message in recording.messages({chosen}):
         t = message.log_time_ns / 1e9
         try:
             decoded = decode(message.type_name, message.data, strict=False)
             t = stamp_seconds(decoded['header']['stamp'])
-            rows += rows_of(t, decoded)
+            rows.append(np.asarray(rows_of(t, decoded), dtype=float).reshape(-1, width))
         except (ConeFeederError, ValueError) as exc:  # the node's line, as it logs it
             refused.append((t, str(exc)))
-    return rows, tuple(sorted(refused, key=lambda row: row[0]))
+    table = np.concatenate(rows)
+    return table[np.argsort(table[:, 0], kind='stable')], refused
 
 
-def mcap_detections(path: Path, topic: str | None = None) -> tuple[np.ndarray, tuple]:
+def mcap_detections(path: Path, topic: str | None = None) -> tuple[np.ndarray, list]:
     """
     Return the detections (k, 5), sorted by t, and the messages refused (see _checked).
 
@@ -91,22 +93,18 @@ def mcap_detections(path: Path, topic: str | None = None) -> tuple[np.ndarray, t
     """
     recording, chosen = _recording(path, topic, DETECTION_TOPICS, 'sensor_msgs/msg/PointCloud2')
 
-    def rows_of(t: float, cloud: dict[str, Any]) -> list:
-        points = cloud_points(cloud)
-        detection_frame(t, points)
-        names = points.dtype.names or ()
-        mass, track = (np.asarray(points[name], dtype=float) if name in names
-                       else np.full(len(points), np.nan) for name in ('mass', 'track_id'))
-        return [np.column_stack([np.full(len(points), t), points['x'], points['y'], mass,
-                                 track])]
+    def rows_of(t: float, cloud: dict[str, Any]) -> np.ndarray:
+        found = detection_frame(t, cloud_points(cloud))
+        k = len(found.xy)
+        return np.column_stack([np.full(k, t), found.xy, *(
+            np.full(k, np.nan) if column is None else column
+            for column in (found.masses, found.track_ids))])
 
-    rows, refused = _checked(recording, chosen, rows_of)
-    table = np.concatenate(rows) if rows else np.zeros((0, 5))
-    return table[np.argsort(table[:, 0], kind='stable')], refused
+    return _checked(recording, chosen, 5, rows_of)
 
 
 def mcap_cone(path: Path, topic: str | None = None,
-              joint: str = 'cone') -> tuple[np.ndarray, tuple]:
+              joint: str = 'cone') -> tuple[np.ndarray, list]:
     """
     Return the cone's measured speeds (j, 2): t (s), omega (rad/s), sorted, and refusals.
 
@@ -114,13 +112,11 @@ def mcap_cone(path: Path, topic: str | None = None,
     twin_node refuses it (:func:`.frames.cone_speed`; see _checked).
     """
     recording, chosen = _recording(path, topic, ('/cone_state',), 'sensor_msgs/msg/JointState')
-    rows, refused = _checked(recording, chosen, lambda t, state: [
-        [t, cone_speed(t, list(state['name']), list(state['velocity']), joint)]])
-    table = np.array(rows, dtype=float).reshape(-1, 2)
-    return table[np.argsort(table[:, 0], kind='stable')], refused
+    return _checked(recording, chosen, 2, lambda t, state: [
+        t, cone_speed(t, list(state['name']), list(state['velocity']), joint)])
 
 
-def mcap_exits(path: Path, channels: int, topic: str | None = None) -> tuple[np.ndarray, tuple]:
+def mcap_exits(path: Path, channels: int, topic: str | None = None) -> tuple[np.ndarray, list]:
     """
     Return the measured exits (e, 3), sorted by t, and the messages refused (see _checked).
 
@@ -130,7 +126,5 @@ def mcap_exits(path: Path, channels: int, topic: str | None = None) -> tuple[np.
     again takes the exits the node took.
     """
     recording, chosen = _recording(path, topic, ('/exit_events',), 'sensor_msgs/msg/PointCloud2')
-    rows, refused = _checked(recording, chosen, lambda t, cloud: measured_exits(
+    return _checked(recording, chosen, 3, lambda t, cloud: measured_exits(
         t, cloud_points(cloud), channels))
-    table = np.array(rows, dtype=float).reshape(-1, 3)
-    return table[np.argsort(table[:, 0], kind='stable')], refused
